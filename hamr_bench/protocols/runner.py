@@ -1,0 +1,341 @@
+"""The runner: carries a protocol's plan out on a rig, records every stream, and owns safety and the end of a run.
+
+Whatever happens (success, Ctrl-C, a device fault, a safety limit, a bug), `Runner.run` leaves the rig safe (drive
+and bias ramped to 0 V, stage stopped) and the recording closed with `exit_status` (success / aborted / failed) and
+a one-line reason. Limits that protect one device live in its driver; the runner adds the ones that need two:
+stage moves toward the leg go in steps no longer than `max_stage_step_m` with the force checked between them, and
+every force sample is checked against `force_limit_N`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from hamr_bench.errors import DeviceError, HamrBenchError, SafetyLimitError
+from hamr_bench.protocols.plan import (
+    Drive,
+    Dwell,
+    FindContact,
+    Home,
+    MoveStage,
+    ReadForce,
+    SetVoltages,
+    Step,
+    Tare,
+)
+from hamr_bench.rig import Rig
+
+POLL_INTERVAL_S = 0.02
+SLOW_STREAM_INTERVAL_S = 0.02  # stage position and amplifier monitors
+FORCE_WINDOW_S = 0.1  # averaging window of a force reading during the contact search
+COMMAND_TOPICS = {"bias": "/amplifier/bias/command", "drive": "/amplifier/drive/command"}
+MONITOR_TOPICS = {"bias": "/amplifier/bias/monitor", "drive": "/amplifier/drive/monitor"}
+
+
+class Progress(Protocol):
+    def step(self, index: int, label: str) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class NoProgress:
+    def step(self, index: int, label: str) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class RunResult:
+    exit_status: str  # success | aborted | failed
+    reason: str
+    steps_done: int
+
+    @property
+    def ok(self) -> bool:
+        return self.exit_status == "success"
+
+
+class Runner:
+    """Executes one protocol on one rig into one recorder."""
+
+    def __init__(self, rig: Rig, recorder: Any, progress: Progress | None = None) -> None:
+        self.rig = rig
+        self.rec = recorder
+        self.clock = rig.clock
+        self.progress = progress or NoProgress()
+        self.step_index = -1
+        self.steps_done = 0
+        self._next_slow_s = 0.0
+        self._streaming = False
+        self._commanded = {"bias": 0.0, "drive": 0.0}
+
+    # ----------------------------------------------------------------- the run and its end
+    def run(self, protocol: ModuleType, params: Any) -> RunResult:
+        status, reason = "success", "completed"
+        try:
+            self._event("run_start", message=f"protocol {protocol.NAME}")
+            self.rig.force_sensor.start_stream()
+            self._streaming = True
+            self._execute(protocol.plan(params))
+        except KeyboardInterrupt:
+            status, reason = "aborted", "interrupted by the operator (Ctrl-C)"
+        except SafetyLimitError as exc:
+            status, reason = "aborted", f"safety limit: {exc}"
+        except DeviceError as exc:
+            status, reason = "failed", f"device fault ({exc.device}): {exc}"
+        except HamrBenchError as exc:
+            status, reason = "failed", str(exc)
+        except Exception as exc:  # a bug: still leave the rig safe and the file closed, then re-raise
+            status, reason = "failed", f"internal error: {type(exc).__name__}: {exc}"
+            self._finish(status, reason)
+            raise
+        self._finish(status, reason)
+        return RunResult(status, reason, self.steps_done)
+
+    def _finish(self, status: str, reason: str) -> None:
+        problems = self.make_safe()
+        if problems:
+            reason = f"{reason}; while making safe: {'; '.join(problems)}"
+            if status == "success":
+                status = "failed"
+        try:
+            self._event("run_end", message=reason, exit_status=status)
+        except HamrBenchError:
+            pass
+        self.rec.close(status, reason)
+        self.progress.close()
+
+    def make_safe(self) -> list[str]:
+        """0 V on both channels (drive first), stage stopped, stream stopped. Each device is tried even if another
+        fails; returns what went wrong."""
+        problems = []
+        for name, amp in (("drive", self.rig.amp_drive), ("bias", self.rig.amp_bias)):
+            try:
+                amp.zero()
+            except Exception as exc:  # noqa: BLE001 - the next device must still be made safe
+                problems.append(f"{name} amplifier: {exc}")
+            self._commanded[name] = 0.0
+            try:
+                self.rec.write_scalar(COMMAND_TOPICS[name], self.clock.now_s(), voltage_V=0.0)
+            except HamrBenchError:
+                pass
+        try:
+            self.rig.stage.stop()
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"stage: {exc}")
+        if self._streaming:
+            try:
+                self.rig.force_sensor.stop_stream()
+            except Exception as exc:  # noqa: BLE001
+                problems.append(f"force sensor: {exc}")
+            self._streaming = False
+        try:
+            self._event("safe_state", message="0 V commanded, stage stopped")
+        except HamrBenchError:
+            pass
+        return problems
+
+    # ----------------------------------------------------------------- plan execution
+    def _execute(self, plan) -> None:
+        handlers: dict[type, Callable[[Any], Any]] = {
+            Step: self._step,
+            Home: self._home,
+            Tare: self._tare,
+            MoveStage: self._move_stage,
+            FindContact: self._find_contact,
+            SetVoltages: self._set_voltages,
+            Drive: self._drive,
+            Dwell: self._dwell,
+            ReadForce: self._read_force,
+        }
+        reply = None
+        while True:
+            try:
+                message = plan.send(reply)
+            except StopIteration:
+                break
+            reply = handlers[type(message)](message)
+        if self.step_index >= 0:
+            self.steps_done = self.step_index + 1
+
+    def _step(self, msg: Step) -> None:
+        if self.step_index >= 0:
+            self.steps_done = self.step_index + 1
+        self.step_index = msg.index
+        self._event("step", message=msg.label, **msg.condition)
+        self.progress.step(msg.index, msg.label)
+
+    def _home(self, _msg: Home) -> None:
+        self._event("home")
+        self.rig.stage.home()
+        self._record_stage()
+
+    def _tare(self, _msg: Tare) -> None:
+        # Streaming must pause: a sensor cannot tare while it streams.
+        self.rig.force_sensor.stop_stream()
+        self.rig.force_sensor.tare()
+        self.rig.force_sensor.start_stream()
+        self._event("tare")
+
+    def _move_stage(self, msg: MoveStage) -> None:
+        self._move_in_safe_steps(msg.position_m)
+
+    def _move_in_safe_steps(self, target_m: float) -> None:
+        low, high = self.rig.stage.limits_m
+        if not (math.isfinite(target_m) and low <= target_m <= high):
+            raise SafetyLimitError(
+                f"stage target {target_m * 1e3:.4f} mm is outside the soft limits "
+                f"[{low * 1e3:.3f}, {high * 1e3:.3f}] mm"
+            )
+        step_m = self.rig.limits.max_stage_step_m
+        position = self.rig.stage.position_m()
+        while abs(target_m - position) > 1e-9:
+            toward_leg = (target_m - position) * self.rig.stage_toward_leg_sign > 0
+            nxt = target_m if (not toward_leg or abs(target_m - position) <= step_m) else (
+                position + math.copysign(step_m, target_m - position))
+            self.rec.write_scalar("/stage/command", self.clock.now_s(), target_m=nxt)
+            self.rig.stage.move_to(nxt)
+            position = nxt
+            self._record_stage()
+            self._drain_force()
+
+    def _find_contact(self, msg: FindContact) -> float:
+        sign = msg.direction_sign * self.rig.stage_toward_leg_sign
+        start = self.rig.stage.position_m()
+        position = start
+        force = self._mean_force(FORCE_WINDOW_S)
+        while force < msg.threshold_N:
+            if abs(position - start) >= msg.max_travel_m:
+                raise DeviceError(
+                    f"no contact within {msg.max_travel_m * 1e3:.2f} mm of travel (force stayed below "
+                    f"{msg.threshold_N * 1e3:.2f} mN): check that the leg is above the sensor",
+                    device="force_sensor",
+                )
+            position += sign * msg.coarse_step_m
+            self._move_in_safe_steps(position)
+            force = self._mean_force(FORCE_WINDOW_S)
+        # Back off until contact is released: the last position still touching is zero sag.
+        release_N = msg.threshold_N / 4
+        backed = 0.0
+        while force > release_N and backed < 2 * msg.coarse_step_m + msg.threshold_N:
+            position -= sign * msg.fine_step_m
+            backed += msg.fine_step_m
+            self._move_in_safe_steps(position)
+            force = self._mean_force(FORCE_WINDOW_S)
+        self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
+                    stage_position_m=position)
+        return position
+
+    def _set_voltages(self, msg: SetVoltages) -> None:
+        # Order the ramps so the foot moves away from the sensor first: lower the drive before the bias.
+        order = ("drive", "bias") if msg.bias_V <= self._commanded["bias"] else ("bias", "drive")
+        targets = {"bias": msg.bias_V, "drive": msg.drive_V}
+        self._event("set_voltages", bias_V=msg.bias_V, drive_V=msg.drive_V)
+        for name in order:
+            amp = self.rig.amp_bias if name == "bias" else self.rig.amp_drive
+            self.rec.write_scalar(COMMAND_TOPICS[name], self.clock.now_s(), voltage_V=targets[name])
+            amp.set_voltage(targets[name])
+            self._commanded[name] = targets[name]
+            self._sample_until(self.clock.now_s(), track=False)
+
+    def _drive(self, msg: Drive) -> None:
+        waveform = np.asarray(msg.waveform_V, dtype=float)
+        start_s = self.rig.amp_drive.play_waveform(waveform, msg.sample_rate_Hz)
+        self._event("drive_start", sample_rate_Hz=msg.sample_rate_Hz, n_samples=len(waveform),
+                    peak_V=float(waveform.max(initial=0.0)), track=msg.track)
+        end_s = start_s + (len(waveform) - 1) / msg.sample_rate_Hz
+        self._sample_until(end_s, track=msg.track, waveform=(start_s, msg.sample_rate_Hz, waveform))
+        self.rig.amp_drive.wait_done()
+        self._commanded["drive"] = float(waveform[-1]) if len(waveform) else self._commanded["drive"]
+        self._event("drive_end")
+
+    def _dwell(self, msg: Dwell) -> None:
+        self._sample_until(self.clock.now_s() + msg.duration_s, track=msg.track)
+
+    def _read_force(self, msg: ReadForce) -> float:
+        return self._mean_force(msg.duration_s)
+
+    # ----------------------------------------------------------------- sampling
+    def _sample_until(self, end_s: float, track: bool, waveform: tuple | None = None) -> None:
+        """Record every stream until the rig clock reaches `end_s` (at least one pass)."""
+        written = 0
+        y0_px = None
+        while True:
+            now = self.clock.now_s()
+            if waveform is not None:
+                written = self._record_waveform(waveform, now, written)
+            self._drain_force()
+            if now >= self._next_slow_s:
+                self._record_stage()
+                self._record_monitors(now)
+                self._next_slow_s = now + SLOW_STREAM_INTERVAL_S
+            if track and self.rig.camera is not None:
+                y0_px = self._grab_and_track(y0_px)
+            if now >= end_s:
+                break
+            if not (track and self.rig.camera is not None):
+                self.clock.sleep(min(POLL_INTERVAL_S, end_s - now))
+        if waveform is not None:
+            self._record_waveform(waveform, end_s, written)
+
+    def _record_waveform(self, waveform: tuple, until_s: float, written: int) -> int:
+        start_s, rate_Hz, samples = waveform
+        due = min(len(samples), int(math.floor((until_s - start_s) * rate_Hz + 1e-9)) + 1)
+        for i in range(written, due):
+            self.rec.write_scalar(COMMAND_TOPICS["drive"], start_s + i / rate_Hz, voltage_V=float(samples[i]))
+        return max(written, due)
+
+    def _drain_force(self) -> list[float]:
+        values = []
+        limit = self.rig.limits.force_limit_N
+        for sample in self.rig.force_sensor.read_stream():
+            self.rec.write_scalar("/force", sample.time_s, force_N=sample.force_N)
+            values.append(sample.force_N)
+            if abs(sample.force_N) > limit:
+                self.rig.stage.stop()
+                raise SafetyLimitError(
+                    f"force {sample.force_N * 1e3:.2f} mN exceeds the limit {limit * 1e3:.2f} mN")
+        return values
+
+    def _mean_force(self, duration_s: float) -> float:
+        end_s = self.clock.now_s() + duration_s
+        values = self._drain_force()
+        while self.clock.now_s() < end_s or not values:
+            self.clock.sleep(POLL_INTERVAL_S)
+            values += self._drain_force()
+            if self.clock.now_s() > end_s + 1.0 and not values:
+                raise DeviceError("force sensor stream delivered no samples for 1 s", device="force_sensor")
+        return float(np.mean(values))
+
+    def _record_stage(self) -> None:
+        self.rec.write_scalar("/stage/position", self.clock.now_s(), position_m=self.rig.stage.position_m())
+
+    def _record_monitors(self, now: float) -> None:
+        for name, amp in (("bias", self.rig.amp_bias), ("drive", self.rig.amp_drive)):
+            self.rec.write_scalar(MONITOR_TOPICS[name], now, voltage_V=amp.monitor_voltage_V())
+
+    def _grab_and_track(self, y0_px: float | None) -> float | None:
+        frame = self.rig.camera.grab()
+        self.rec.write_image("/camera/image", frame.time_s, frame.image)
+        if self.rig.track_px is None:
+            return y0_px
+        x_px, y_px = self.rig.track_px(frame.image)
+        if y0_px is None:
+            y0_px = y_px
+        displacement_m = (y_px - y0_px) * self.rig.metres_per_pixel * self.rig.displacement_sign
+        self.rec.write_scalar("/camera/displacement", frame.time_s, displacement_m=displacement_m,
+                              x_px=x_px, y_px=y_px)
+        return y0_px
+
+    def _event(self, kind: str, message: str = "", **data: Any) -> None:
+        clean = {k: (float(v) if isinstance(v, (np.floating, np.integer)) else v) for k, v in data.items()}
+        json.dumps(clean)  # fail here, not in the writer thread, if a value cannot be recorded
+        self.rec.write_event(self.clock.now_s(), kind, max(self.step_index, 0), message, **clean)
