@@ -1,0 +1,217 @@
+"""Driver for Loadstar Sensors load cells on a DI-1000 (DI-100U/DI-1000U) or iLoad interface, over a USB
+serial port (9600 8N1 default, command + CR, replies end CR LF).
+
+Implements `hamr_bench.interfaces.ForceSensor` in newtons: identify (MODEL and serial number), units,
+capacity, tare, single reading, streaming with a clean stop. Opening the port stops and drains a sensor an
+earlier program left streaming (CR, read until quiet, CR -> `A`). Readings are converted from the sensor's
+unit (lb, kg, g, N; millipounds on iLoad). A reading beyond the capacity is a DeviceFault (overload); the
+runner checks force limits of its own too. The two interfaces' command names are data (`COMMAND_SETS`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import serial
+
+from drivers.serial_line import PortOpener, SerialLine
+from hamr_bench.clock import Clock
+from hamr_bench.errors import DeviceFault, DeviceProtocolError, DeviceTimeout
+from hamr_bench.interfaces import ForceSample
+
+NEWTONS_PER_UNIT: dict[str, float] = {
+    "LB": 4.4482216152605,  # pound-force, exact by definition
+    "MLB": 4.4482216152605e-3,
+    "KG": 9.80665,  # kilogram-force
+    "G": 9.80665e-3,
+    "N": 1.0,
+}
+
+
+@dataclass(frozen=True)
+class LoadstarCommands:
+    """The command texts of one interface. `units=None`: the interface has no UNITS query and reads in
+    `reading_unit`; `capacity_unit=None`: capacity is in the unit UNITS reports."""
+
+    name: str
+    model: str
+    identify: str
+    units: str | None
+    capacity: str
+    tare: str
+    read: str
+    stream: str
+    reading_unit: str | None
+    capacity_unit: str | None
+
+
+# UNVERIFIED against RSP2 firmware: from the Loadstar DI-100U/DI-1000U and iLoad command lists.
+COMMAND_SETS: dict[str, LoadstarCommands] = {
+    "di1000": LoadstarCommands("di1000", "MODEL", "SS1", "UNITS", "SLC", "CT0", "W", "WC", None, None),
+    "iload": LoadstarCommands("iload", "MODEL", "ID", None, "LC", "TARE", "O0W1", "O0W0", "MLB", "LB"),
+}
+
+
+class LoadstarSensor:
+    """One Loadstar sensor. Opening it drains a stream left running and reads its units and capacity."""
+
+    def __init__(
+        self,
+        url_or_port: str,
+        clock: Clock,
+        *,
+        command_set: str = "di1000",
+        baudrate: int = 9600,
+        timeout_s: float = 0.5,
+        tare_timeout_s: float = 3.0,
+        drain_quiet_s: float = 0.05,
+        stream_rate_Hz: float = 150.0,
+        capacity_N: float | None = None,
+        device: str = "force_sensor",
+        port_opener: PortOpener = serial.serial_for_url,
+    ) -> None:
+        if command_set not in COMMAND_SETS:
+            raise ValueError(f"{device}: command_set {command_set!r} not one of {sorted(COMMAND_SETS)}")
+        self.clock = clock
+        self.device = device
+        self.commands = COMMAND_SETS[command_set]
+        self.timeout_s = float(timeout_s)
+        self.tare_timeout_s = float(tare_timeout_s)
+        self.drain_quiet_s = float(drain_quiet_s)
+        self.stream_rate_Hz = float(stream_rate_Hz)
+        self._streaming = False
+        self._last_stream_data_s = 0.0
+        self._last_sample_s = -math.inf
+        self._line = SerialLine(
+            url_or_port,
+            clock,
+            device=device,
+            baudrate=baudrate,
+            timeout_s=timeout_s,
+            xonxoff=False,
+            write_terminator=b"\r",
+            read_terminator=b"\r\n",
+            port_opener=port_opener,
+        )
+        try:
+            self._stop_and_drain()
+            self.reading_unit = self.commands.reading_unit or self.units()
+            self._newtons_per_reading_unit = self._unit_factor(self.reading_unit)
+            if capacity_N is None:
+                capacity_unit = self.commands.capacity_unit or self.reading_unit
+                capacity = self._number(self._line.query(self.commands.capacity), "capacity")
+                capacity_N = capacity * self._unit_factor(capacity_unit)
+        except Exception:
+            self._line.close()
+            raise
+        if not capacity_N > 0:
+            raise DeviceProtocolError(f"{device}: capacity {capacity_N} N is not positive", device)
+        self._capacity_N = float(capacity_N)
+
+    # -- helpers -------------------------------------------------------------------------------------------
+    def _unit_factor(self, unit: str) -> float:
+        factor = NEWTONS_PER_UNIT.get(unit.strip().upper())
+        if factor is None:
+            known = ", ".join(NEWTONS_PER_UNIT)
+            raise DeviceProtocolError(f"{self.device}: unknown unit {unit!r} (known: {known})", self.device)
+        return factor
+
+    def _number(self, text: str, what: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise DeviceProtocolError(f"{self.device}: {what} reply {text!r} is not a number", self.device)
+        return value
+
+    def _to_N(self, text: str, time_s: float) -> float:
+        force_N = self._number(text, "reading") * self._newtons_per_reading_unit
+        if abs(force_N) > self._capacity_N:
+            raise DeviceFault(
+                f"{self.device}: overload: {force_N:.4g} N at t={time_s:.3f} s "
+                f"beyond capacity {self._capacity_N:.4g} N",
+                self.device,
+            )
+        return force_N
+
+    def _stop_and_drain(self) -> None:
+        """CR stops a stream; discard everything until the line is quiet; CR must then answer `A`."""
+        self._line.write_line("")
+        self._line.drain(self.drain_quiet_s)
+        reply = self._line.query("")
+        if reply.upper() != "A":
+            raise DeviceProtocolError(f"{self.device}: expected 'A' after CR, got {reply!r}", self.device)
+
+    # -- identity ------------------------------------------------------------------------------------------
+    def identify(self) -> tuple[str, str]:
+        """(model, serial number)."""
+        return self._line.query(self.commands.model), self._line.query(self.commands.identify)
+
+    def units(self) -> str:
+        if self.commands.units is None:
+            return self.commands.reading_unit or "MLB"
+        return self._line.query(self.commands.units).upper()
+
+    # -- ForceSensor surface -------------------------------------------------------------------------------
+    @property
+    def capacity_N(self) -> float:
+        return self._capacity_N
+
+    def tare(self) -> None:
+        reply = self._line.query(self.commands.tare, timeout_s=self.tare_timeout_s)
+        if reply.upper() != "TARED":
+            message = f"{self.device}: expected 'Tared' after {self.commands.tare}, got {reply!r}"
+            raise DeviceProtocolError(message, self.device)
+
+    def read_N(self) -> float:
+        reply = self._line.query(self.commands.read)
+        return self._to_N(reply, self.clock.now_s())
+
+    def start_stream(self) -> None:
+        self._line.write_line(self.commands.stream)
+        self._streaming = True
+        self._last_stream_data_s = self.clock.now_s()
+
+    def read_stream(self) -> list[ForceSample]:
+        """Samples received since the last call. They arrive without timestamps; the last one of a batch is
+        stamped with its arrival time and earlier ones are spaced back at the stream rate (never before the
+        previous batch). DeviceTimeout when no line has come for the timeout."""
+        if not self._streaming:
+            return []
+        lines = self._line.read_available_lines("stream")
+        now_s = self.clock.now_s()
+        if not lines:
+            if now_s - self._last_stream_data_s > self.timeout_s:
+                pending = self._line.pending_bytes
+                if pending:
+                    raise DeviceProtocolError(
+                        f"{self.device}: stream bytes without line ends for {self.timeout_s:g} s "
+                        f"({pending[:40]!r}...)",
+                        self.device,
+                    )
+                message = f"{self.device}: stream silent for more than {self.timeout_s:g} s"
+                raise DeviceTimeout(message, self.device)
+            return []
+        self._last_stream_data_s = now_s
+        period_s = 1.0 / self.stream_rate_Hz
+        samples = []
+        n = len(lines)
+        for i, text in enumerate(lines):
+            time_s = max(now_s - (n - 1 - i) * period_s, self._last_sample_s + 1e-9)
+            time_s = min(time_s, now_s)
+            samples.append(ForceSample(time_s=time_s, force_N=self._to_N(text, time_s)))
+            self._last_sample_s = time_s
+        return samples
+
+    def stop_stream(self) -> None:
+        self._streaming = False
+        self._stop_and_drain()
+
+    def close(self) -> None:
+        if self._streaming:
+            try:
+                self.stop_stream()
+            except (DeviceTimeout, DeviceProtocolError, DeviceFault):
+                pass  # closing anyway; the next open drains
+        self._line.close()
