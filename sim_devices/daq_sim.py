@@ -1,0 +1,425 @@
+"""The simulated DAQ and what hangs off it: HV amplifiers (TREK-style) on its analog outputs and an ATI
+Nano17's six strain-gauge channels on its analog inputs.
+
+`SimDaq` has the surface of `drivers.daq.DaqBackend` (duck-typed: `sim_devices` never imports `drivers`), so
+the real amplifier and Nano17 drivers run on it unchanged. Everything is timed on the injected clock:
+
+- Analog output is a zero-order hold of what was written: scalar writes and hardware-timed waveform samples at
+  `t0 + k / rate` (the last sample holds). The amplifier output is `gain x AO` (clipped at its rail) through a
+  first-order low-pass of the configured bandwidth, solved exactly for the piecewise-constant input, so
+  `output_voltage_V(channel, time_s)` is computable at any time the bench asks (within `history_s`).
+- The monitor AI channel reads `output / monitor_scale` plus noise.
+- Gauge AI channels read `inv(C) @ wrench(t) + bias` plus noise, clipped at the DAQ range;
+  `wrench_source(time_s)` is the bench's callback returning (Fx, Fy, Fz in N, Tx, Ty, Tz in N m) and `C` the
+  calibration matrix in SI. A callback with the attribute `vectorised = True` is called once per block with an
+  array of times and returns shape (n, 6).
+
+Not modelled: amplifier slew-rate limit and current limit, output impedance and the PZT's capacitive load, DAQ
+quantisation and range settings, AI/AO settling, buffer overflow of a stream read too rarely.
+
+Faults (names shared with `sim_devices.faults`): 'amp_trip' (an amplifier's output collapses to 0 V and stays
+there until the fault is cleared), 'disconnect' (every call raises DeviceFault), 'no_reply' (reads wait out
+their timeout and raise DeviceTimeout; writes raise DeviceTimeout), 'overload' (the Nano17's gauges pin at the
+input range). Each can be scheduled at a clock time (`at_s`). Noise comes from the `numpy.random.Generator`
+given.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.signal import lfilter
+
+from hamr_bench.clock import Clock
+from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout
+from sim_devices.faults import AMPLIFIER_FAULTS, FORCE_SENSOR_FAULTS, FaultInjector
+
+DAQ_FAULTS = AMPLIFIER_FAULTS + FORCE_SENSOR_FAULTS
+_AXES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+_TORQUE_TO_N_M = {"N-m": 1.0, "Nm": 1.0, "N-mm": 1e-3, "Nmm": 1e-3}
+
+
+@dataclass(frozen=True)
+class SimAmplifierSpec:
+    """One HV amplifier channel between a DAQ analog output and the actuator. Defaults are placeholders
+    (UNVERIFIED for the PZD350A): give the rig's values in the rig file."""
+
+    ao_channel: str
+    monitor_channel: str
+    gain_V_per_V: float = 35.0
+    bandwidth_Hz: float = 5_000.0
+    monitor_scale_V_per_V: float = 100.0  # output volts per monitor volt
+    rail_V: float = 350.0
+    monitor_noise_V: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name in ("gain_V_per_V", "bandwidth_Hz", "monitor_scale_V_per_V", "rail_V"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"SimAmplifierSpec.{name}: must be a positive finite number, got {value!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class SimNano17Spec:
+    """A six-gauge F/T sensor on six AI channels. `calibration_SI` maps gauge volts to
+    (N, N, N, N m, N m, N m)."""
+
+    gauge_channels: tuple[str, ...]
+    calibration_SI: np.ndarray
+    bias_V: tuple[float, ...] = (0.1, -0.2, 0.05, 0.15, -0.1, 0.02)
+    noise_V: float = 1e-3
+    range_V: float = 10.0
+
+    def __post_init__(self) -> None:
+        if len(self.gauge_channels) != 6 or np.shape(self.calibration_SI) != (6, 6) or len(self.bias_V) != 6:
+            raise ConfigError("SimNano17Spec: needs 6 gauge channels, a 6x6 calibration and 6 bias voltages")
+
+
+def load_calibration_SI(path: Path | str) -> np.ndarray:
+    """The 6x6 `UserAxis` matrix of an ATI calibration XML file, with torque rows converted to N m per volt.
+    (A small reader of its own so that the simulated sensor does not depend on the driver it is used to
+    test.)"""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise ConfigError(f"{path}: cannot read ATI calibration ({exc})") from None
+    cal = root.find("Calibration")
+    if cal is None:
+        raise ConfigError(f"{path}: no <Calibration> element")
+    torque_scale = _TORQUE_TO_N_M.get(cal.get("TorqueUnits", "N-m"))
+    if torque_scale is None or cal.get("ForceUnits", "N") != "N":
+        raise ConfigError(f"{path}: sim supports ForceUnits N and TorqueUnits N-m/N-mm only")
+    rows = {
+        ax.get("Name"): [float(v) for v in ax.get("values", "").split()] for ax in cal.findall("UserAxis")
+    }
+    matrix = np.array([rows[name] for name in _AXES], dtype=float)
+    matrix[3:] *= torque_scale
+    return matrix
+
+
+@dataclass
+class _Segment:
+    """Output written at `t0_s`: samples `target_V` (amplifier output targets) every `dt_s` (inf for a
+    scalar)."""
+
+    t0_s: float
+    dt_s: float
+    daq_V: np.ndarray
+    target_V: np.ndarray
+    y_V: np.ndarray  # amplifier output at each sample's start time
+
+    @property
+    def end_s(self) -> float:
+        return self.t0_s + len(self.daq_V) * self.dt_s if math.isfinite(self.dt_s) else math.inf
+
+
+@dataclass
+class _AoChannel:
+    amp: SimAmplifierSpec | None
+    tau_s: float
+    segments: list[_Segment] = field(default_factory=list)
+    starts_s: list[float] = field(default_factory=list)
+    tripped_at_s: float | None = None
+
+
+class SimDaq:
+    """A simulated DAQ device with HV amplifiers and an optional Nano17 attached (surface: `DaqBackend`)."""
+
+    def __init__(
+        self,
+        clock: Clock,
+        rng: np.random.Generator,
+        *,
+        amplifiers: Sequence[SimAmplifierSpec] = (),
+        nano17: SimNano17Spec | None = None,
+        wrench_source: Callable[[float], Sequence[float]] | None = None,
+        ai_channels: Sequence[str] = (),
+        ao_channels: Sequence[str] = (),
+        ai_noise_V: float = 1e-3,
+        history_s: float = 60.0,
+        max_ao_rate_Hz: float = 1e6,
+        max_ai_rate_Hz: float = 1e6,
+    ) -> None:
+        self._clock = clock
+        self._rng = rng
+        self._history_s = history_s
+        self._max_ao_rate_Hz = max_ao_rate_Hz
+        self._max_ai_rate_Hz = max_ai_rate_Hz
+        self._ai_noise_V = ai_noise_V
+        self._ao: dict[str, _AoChannel] = {}
+        self._monitors: dict[str, str] = {}
+        for amp in amplifiers:
+            self._ao[amp.ao_channel] = _AoChannel(amp, 1.0 / (2 * math.pi * amp.bandwidth_Hz))
+            self._monitors[amp.monitor_channel] = amp.ao_channel
+        for name in ao_channels:  # bare outputs (nothing attached): output = AO volts, no lag
+            self._ao.setdefault(name, _AoChannel(None, 0.0))
+        self._nano17 = nano17
+        self._wrench_source = wrench_source
+        self._gauge_index: dict[str, int] = {}
+        if nano17 is not None:
+            if wrench_source is None:
+                raise ConfigError("SimDaq: a Nano17 needs a wrench_source(time_s) callback")
+            self._gauge_index = {ch: i for i, ch in enumerate(nano17.gauge_channels)}
+            self._inverse_cal = np.linalg.inv(np.asarray(nano17.calibration_SI, dtype=float))
+        self._plain_ai = set(ai_channels)
+        self._faults = FaultInjector(DAQ_FAULTS, "sim DAQ", clock)
+        self._stream: tuple[tuple[str, ...], float, float] | None = None  # channels, rate, next sample time
+        self.ao_write_count = 0
+
+    # ---- fault injection -----------------------------------------------------------------------------------
+    def inject_fault(self, name: str, channel: str | None = None, at_s: float | None = None) -> None:
+        """Switch a fault on now (or at `at_s` on the clock). 'amp_trip' takes the amplifier's AO channel (all
+        amplifiers if None)."""
+        at = self._clock.now_s() if at_s is None else float(at_s)
+        self._faults.inject(name, at)  # validates the name
+        if name == "amp_trip":
+            for ch_name, ch in self._ao.items():
+                if ch.amp is not None and channel in (None, ch_name):
+                    ch.tripped_at_s = at if ch.tripped_at_s is None else min(ch.tripped_at_s, at)
+
+    def clear_fault(self, name: str) -> None:
+        if name == "amp_trip":
+            for ch in self._ao.values():
+                ch.tripped_at_s = None
+        self._faults.clear(name)
+
+    def _active(self, name: str) -> bool:
+        return self._faults.is_active(name, self._clock.now_s())
+
+    def _check_link(self, what: str) -> None:
+        if self._active("disconnect"):
+            raise DeviceFault(f"sim DAQ: device disconnected during {what}", device="daq")
+        if self._active("no_reply"):
+            raise DeviceTimeout(f"sim DAQ: no response to {what}", device="daq")
+
+    # ---- analog output -------------------------------------------------------------------------------------
+    def _channel(self, channel: str) -> _AoChannel:
+        try:
+            return self._ao[channel]
+        except KeyError:
+            known = ", ".join(self._ao)
+            raise ConfigError(f"sim DAQ: no analog output {channel!r} (known: {known})") from None
+
+    def _append(self, ch: _AoChannel, t0_s: float, dt_s: float, daq_V: np.ndarray) -> None:
+        y0 = float(self._output(ch, np.array([t0_s]), apply_trip=False)[0])
+        if ch.amp is not None:
+            target = np.clip(daq_V * ch.amp.gain_V_per_V, -ch.amp.rail_V, ch.amp.rail_V)
+        else:
+            target = daq_V.copy()
+        if ch.tau_s == 0.0 or len(target) == 1:
+            y = np.concatenate([[y0], target[:-1]]) if ch.tau_s == 0.0 else np.array([y0])
+        else:
+            a = math.exp(-dt_s / ch.tau_s)
+            z = lfilter([1.0 - a], [1.0, -a], target, zi=[a * y0])[0]
+            y = np.concatenate([[y0], z[:-1]])
+        # a new write replaces everything scheduled from t0 on
+        cut = bisect.bisect_left(ch.starts_s, t0_s)
+        del ch.segments[cut:], ch.starts_s[cut:]
+        ch.segments.append(_Segment(t0_s, dt_s, daq_V, target, y))
+        ch.starts_s.append(t0_s)
+        horizon = t0_s - self._history_s
+        drop = bisect.bisect_left(ch.starts_s, horizon) - 1  # keep the segment in force at the horizon
+        if drop > 0:
+            del ch.segments[:drop], ch.starts_s[:drop]
+
+    def write_ao_scalar(self, channel: str, value_V: float) -> None:
+        self._check_link("an analog output write")
+        ch = self._channel(channel)
+        if not math.isfinite(value_V):
+            raise ConfigError(f"sim DAQ: non-finite value {value_V!r} written to {channel}")
+        self.ao_write_count += 1
+        self._append(ch, self._clock.now_s(), math.inf, np.array([float(value_V)]))
+
+    def write_ao_waveform(self, channel: str, samples_V: np.ndarray, sample_rate_Hz: float) -> float:
+        self._check_link("a waveform write")
+        ch = self._channel(channel)
+        samples = np.asarray(samples_V, dtype=float).ravel()
+        if samples.size == 0 or not np.all(np.isfinite(samples)):
+            raise ConfigError(f"sim DAQ: waveform for {channel} is empty or not finite")
+        if not (math.isfinite(sample_rate_Hz) and 0 < sample_rate_Hz <= self._max_ao_rate_Hz):
+            raise ConfigError(
+                f"sim DAQ: AO sample rate {sample_rate_Hz!r} Hz outside (0, {self._max_ao_rate_Hz}]"
+            )
+        self.ao_write_count += 1
+        t0 = self._clock.now_s()
+        self._append(ch, t0, 1.0 / sample_rate_Hz, samples)
+        return t0
+
+    def wait_ao_done(self, channel: str, timeout_s: float) -> None:
+        self._check_link("a wait for waveform end")
+        ch = self._channel(channel)
+        now = self._clock.now_s()
+        end = ch.segments[-1].end_s if ch.segments else now
+        if not math.isfinite(end):  # a scalar write: nothing is running
+            return
+        if end - now > timeout_s:
+            self._clock.sleep(timeout_s)
+            message = f"sim DAQ: waveform on {channel} still running after {timeout_s:g} s"
+            raise DeviceTimeout(message, device="daq")
+        self._clock.sleep(end - now)
+
+    def stop_ao(self, channel: str) -> float:
+        self._check_link("an analog output stop")
+        ch = self._channel(channel)
+        now = self._clock.now_s()
+        held = self.ao_value_V(channel, now)
+        if ch.segments and ch.segments[-1].end_s > now:
+            self._append(ch, now, math.inf, np.array([held]))
+        return held
+
+    # ---- what the bench and tests can see ------------------------------------------------------------------
+    def ao_value_V(self, channel: str, time_s: float) -> float:
+        """The DAQ output volts on `channel` at `time_s` (zero-order hold; 0 before the first write)."""
+        ch = self._channel(channel)
+        i = bisect.bisect_right(ch.starts_s, time_s) - 1
+        if i < 0:
+            return 0.0
+        seg = ch.segments[i]
+        k = 0 if not math.isfinite(seg.dt_s) else min(int((time_s - seg.t0_s) / seg.dt_s), len(seg.daq_V) - 1)
+        return float(seg.daq_V[k])
+
+    def _output(self, ch: _AoChannel, t: np.ndarray, apply_trip: bool = True) -> np.ndarray:
+        out = np.zeros_like(t, dtype=float)
+        if ch.segments:
+            if t.size == 1:  # the bench's usual question: no array conversion of the whole history
+                idx = np.array([bisect.bisect_right(ch.starts_s, float(t[0])) - 1])
+            else:
+                idx = np.searchsorted(np.asarray(ch.starts_s), t, side="right") - 1
+            for i in np.unique(idx[idx >= 0]):
+                sel = idx == i
+                seg = ch.segments[i]
+                ts = t[sel]
+                if math.isfinite(seg.dt_s):
+                    k = np.clip(((ts - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
+                    tk = seg.t0_s + k * seg.dt_s
+                else:
+                    k = np.zeros(ts.shape, dtype=int)
+                    tk = np.full(ts.shape, seg.t0_s)
+                target, yk = seg.target_V[k], seg.y_V[k]
+                if ch.tau_s > 0:
+                    out[sel] = target + (yk - target) * np.exp(-(ts - tk) / ch.tau_s)
+                else:
+                    out[sel] = target
+        if apply_trip and ch.tripped_at_s is not None:
+            out[t >= ch.tripped_at_s] = 0.0
+        return out
+
+    def output_voltage_V(self, channel: str, time_s: float | np.ndarray) -> float | np.ndarray:
+        """The amplifier's output (volts on the actuator) at `time_s` for the amplifier on AO `channel`."""
+        ch = self._channel(channel)
+        t = np.atleast_1d(np.asarray(time_s, dtype=float))
+        if t.size and t.min() < self._clock.now_s() - self._history_s:
+            raise ConfigError(
+                f"sim DAQ: output at t={t.min():g} s is older than history_s={self._history_s:g}"
+            )
+        out = self._output(ch, t)
+        return float(out[0]) if np.ndim(time_s) == 0 else out
+
+    # ---- analog input --------------------------------------------------------------------------------------
+    def _ai_values(self, channels: Sequence[str], times_s: np.ndarray) -> np.ndarray:
+        data = np.empty((len(channels), times_s.size))
+        gauges = None
+        for c, name in enumerate(channels):
+            if name in self._monitors:
+                ch = self._ao[self._monitors[name]]
+                assert ch.amp is not None
+                noise = self._rng.normal(0.0, ch.amp.monitor_noise_V, times_s.size)
+                data[c] = self._output(ch, times_s) / ch.amp.monitor_scale_V_per_V + noise
+            elif name in self._gauge_index:
+                if gauges is None:
+                    gauges = self._gauge_volts(times_s)
+                data[c] = gauges[self._gauge_index[name]]
+            elif name in self._plain_ai:
+                data[c] = self._rng.normal(0.0, self._ai_noise_V, times_s.size)
+            else:
+                known = [*self._monitors, *self._gauge_index, *self._plain_ai]
+                raise ConfigError(f"sim DAQ: no analog input {name!r} (known: {', '.join(known)})")
+        return data
+
+    def _gauge_volts(self, times_s: np.ndarray) -> np.ndarray:
+        spec = self._nano17
+        assert spec is not None and self._wrench_source is not None
+        if getattr(self._wrench_source, "vectorised", False):  # one call for the whole block (the bench's)
+            wrench = np.asarray(self._wrench_source(times_s), dtype=float).reshape(-1, 6)
+        else:
+            wrench = np.array([np.asarray(self._wrench_source(float(t)), dtype=float) for t in times_s])
+            wrench = wrench.reshape(-1, 6)
+        volts = self._inverse_cal @ wrench.T + np.asarray(spec.bias_V)[:, None]
+        volts += self._rng.normal(0.0, spec.noise_V, volts.shape)
+        if times_s.size and self._faults.is_active("overload", float(times_s[-1])):
+            # the sensor is pushed far past its range: every gauge pins at the input limit
+            overloaded = np.array([self._faults.is_active("overload", float(t)) for t in times_s], dtype=bool)
+            volts[:, overloaded] = np.where(volts[:, overloaded] >= 0, spec.range_V, -spec.range_V)
+        return np.clip(volts, -spec.range_V, spec.range_V)
+
+    def read_ai(
+        self, channels: Sequence[str], n_samples: int, sample_rate_Hz: float, timeout_s: float = 10.0
+    ) -> SimAiBlock:
+        if self._active("no_reply") and not self._active("disconnect"):
+            self._clock.sleep(timeout_s)  # a read that never completes waits out its timeout
+        self._check_link("an analog input read")
+        if not (math.isfinite(sample_rate_Hz) and 0 < sample_rate_Hz <= self._max_ai_rate_Hz):
+            raise ConfigError(
+                f"sim DAQ: AI sample rate {sample_rate_Hz!r} Hz outside (0, {self._max_ai_rate_Hz}]"
+            )
+        if n_samples < 1:
+            raise ConfigError(f"sim DAQ: n_samples must be >= 1, got {n_samples}")
+        duration_s = n_samples / sample_rate_Hz
+        if duration_s > timeout_s:
+            self._clock.sleep(timeout_s)
+            raise DeviceTimeout(
+                f"sim DAQ: {n_samples} samples at {sample_rate_Hz:g} Hz exceed timeout {timeout_s:g} s",
+                device="daq",
+            )
+        t0 = self._clock.now_s()
+        times = t0 + np.arange(n_samples) / sample_rate_Hz
+        data = self._ai_values(tuple(channels), times)
+        self._clock.sleep(duration_s)
+        return SimAiBlock(t0, float(sample_rate_Hz), data)
+
+    def start_ai_stream(self, channels: Sequence[str], sample_rate_Hz: float) -> float:
+        self._check_link("an analog input stream start")
+        self._ai_values(tuple(channels), np.empty(0))  # validates the channel names
+        if not (math.isfinite(sample_rate_Hz) and 0 < sample_rate_Hz <= self._max_ai_rate_Hz):
+            raise ConfigError(
+                f"sim DAQ: AI sample rate {sample_rate_Hz!r} Hz outside (0, {self._max_ai_rate_Hz}]"
+            )
+        t0 = self._clock.now_s()
+        self._stream = (tuple(channels), float(sample_rate_Hz), t0)
+        return t0
+
+    def read_ai_stream(self) -> SimAiBlock:
+        self._check_link("an analog input stream read")
+        if self._stream is None:
+            raise ConfigError("sim DAQ: read_ai_stream() without start_ai_stream()")
+        channels, rate, t_next = self._stream
+        now = self._clock.now_s()
+        n = int(math.floor((now - t_next) * rate + 1e-9)) + 1 if now >= t_next else 0
+        times = t_next + np.arange(n) / rate
+        self._stream = (channels, rate, t_next + n / rate)
+        return SimAiBlock(t_next, rate, self._ai_values(channels, times))
+
+    def stop_ai_stream(self) -> None:
+        self._stream = None
+
+    def close(self) -> None:
+        self._stream = None
+
+
+@dataclass(frozen=True)
+class SimAiBlock:
+    """Same fields as `drivers.daq.AiBlock` (duck-typed)."""
+
+    start_time_s: float
+    sample_rate_Hz: float
+    data_V: np.ndarray
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return self.start_time_s + np.arange(self.data_V.shape[1]) / self.sample_rate_Hz

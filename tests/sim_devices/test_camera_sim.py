@@ -1,0 +1,124 @@
+"""Simulated camera: frame timing on the clock, the image model's photometry and noise, settings read-back,
+faults, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from hamr_bench.clock import VirtualClock
+from sim_devices.camera_sim import (
+    SimCamera,
+    SimCameraSpec,
+    background_dn_table,
+    digitise,
+    expected_electrons,
+    render_frame,
+)
+
+
+def cam(marker=lambda t: (320.3, 240.6), seed=0, **spec_kw):
+    clock = VirtualClock()
+    return clock, SimCamera(clock, np.random.default_rng(seed), marker, SimCameraSpec(**spec_kw))
+
+
+def test_read_waits_for_exposure_end_and_stamps_mid_exposure() -> None:
+    clock, c = cam(frame_rate_Hz=50.0, exposure_s=4e-3)
+    ok, img = c.read()
+    assert ok and img.shape == (480, 640) and img.dtype == np.uint8
+    assert clock.now_s() == pytest.approx(4e-3)
+    assert c.get(cv2.CAP_PROP_POS_MSEC) == pytest.approx(2.0)
+    assert c.get(cv2.CAP_PROP_POS_FRAMES) == 1.0
+    c.read()
+    assert clock.now_s() == pytest.approx(0.02 + 4e-3)
+    clock.advance_to(1.0)  # reader far behind: the ring buffer kept only the newest 4 frames
+    c.read()
+    assert c.get(cv2.CAP_PROP_POS_FRAMES) - 1 == 49 - 4 + 1
+    assert c.frames_lost == 49 - 4 + 1 - 2
+
+
+def test_expected_image_photometry() -> None:
+    spec = SimCameraSpec(spot_e_per_s=1e7, background_e_per_pixel_per_s=1e4)
+    mu = expected_electrons(spec, np.array([[100.25, 80.75]]), 2e-3, (200, 200))
+    bg = 1e4 * 2e-3
+    assert (mu - bg).sum() == pytest.approx(1e7 * 2e-3, rel=1e-9)  # all of the spot lands on the patch
+    ys, xs = np.mgrid[0:200, 0:200]
+    assert ((mu - bg) * xs).sum() / (mu - bg).sum() == pytest.approx(100.25, abs=1e-9)
+    assert ((mu - bg) * ys).sum() / (mu - bg).sum() == pytest.approx(80.75, abs=1e-9)
+    # pixel-integrated Gaussian variance: sigma^2 + 1/12
+    var_x = ((mu - bg) * (xs - 100.25) ** 2).sum() / (mu - bg).sum()
+    assert var_x == pytest.approx(spec.spot_sigma_px**2 + 1 / 12, rel=1e-6)
+
+
+def test_noise_matches_shot_plus_read_plus_quantisation() -> None:
+    spec = SimCameraSpec(read_noise_e=5.0, gain_DN_per_e=0.1, bit_depth=12)
+    rng = np.random.default_rng(1)
+    mean_e = np.full((400, 400), 900.0)
+    dn = digitise(spec, mean_e, rng).astype(float)
+    assert dn.mean() == pytest.approx(90.0, abs=0.05)
+    expected_var_dn = (900 + 25) * 0.01 + 1 / 12
+    assert dn.var() == pytest.approx(expected_var_dn, rel=0.03)
+
+
+def test_background_table_matches_exact_draws() -> None:
+    spec = SimCameraSpec()
+    rng = np.random.default_rng(2)
+    table = background_dn_table(spec, 37.0)
+    fast = table[rng.integers(0, 2**16, size=200_000, dtype=np.uint16)].astype(float)
+    exact = digitise(spec, np.full(200_000, 37.0), rng).astype(float)
+    assert fast.mean() == pytest.approx(exact.mean(), abs=0.01)
+    assert fast.var() == pytest.approx(exact.var(), rel=0.03)
+
+
+def test_rendered_frame_is_background_far_from_the_spot_and_bright_on_it() -> None:
+    spec = SimCameraSpec(spot_e_per_s=1e7)
+    img = render_frame(spec, np.array([[50.0, 40.0]]), 2e-3, (120, 160), np.random.default_rng(3))
+    peak_e = 1e7 * 2e-3 * (math.erf(0.5 / (2 * math.sqrt(2))) ** 2)  # central pixel share of a sigma-2 spot
+    assert img[40, 50] == pytest.approx((peak_e + 20) * 0.1, abs=6)
+    assert img[100:, 100:].mean() == pytest.approx(2.0, abs=0.1)
+
+
+def test_settings_are_clamped_and_read_back() -> None:
+    clock, c = cam()
+    assert c.set(cv2.CAP_PROP_FRAME_WIDTH, 1280) and c.get(cv2.CAP_PROP_FRAME_HEIGHT) == 1024
+    assert c.get(cv2.CAP_PROP_FPS) == 27.0  # the mode's maximum
+    assert not c.set(cv2.CAP_PROP_FRAME_WIDTH, 1000)
+    c.set(cv2.CAP_PROP_EXPOSURE, 1000)  # 100 ms asked, longer than a frame: clamped
+    assert c.get(cv2.CAP_PROP_EXPOSURE) * 1e-4 == pytest.approx(1 / 27.0)
+
+
+def test_marker_motion_blurs_along_its_path() -> None:
+    clock, c = cam(marker=lambda t: (100.0 + 4000.0 * t, 100.0), exposure_s=5e-3, spot_e_per_s=1e7)
+    _, img = c.read()  # moves 20 px during the exposure, from x = 100 to 120
+    row = img[100].astype(float)
+    assert row[105:116].min() > 0.3 * row.max()
+    assert row[90] < 0.1 * row.max() and row[130] < 0.1 * row.max()  # background only
+
+
+def test_faults_and_determinism() -> None:
+    _, a = cam(seed=5)
+    _, b = cam(seed=5)
+    assert np.array_equal(a.read()[1], b.read()[1])
+    clock, c = cam()
+    c.inject_fault("no_reply")
+    assert c.read() == (False, None) and clock.now_s() == pytest.approx(1.0)
+    c.clear_fault("no_reply")
+    c.inject_fault("dropped_frames", 0.5)
+    indices = []
+    for _ in range(50):
+        c.read()
+        indices.append(c.get(cv2.CAP_PROP_POS_FRAMES) - 1)
+    assert np.max(np.diff(indices)) > 1 and c.frames_lost > 10
+    c.inject_fault("disconnect")
+    assert c.read() == (False, None) and not c.isOpened()
+
+
+def test_scheduled_disconnect() -> None:
+    clock, c = cam()
+    c.inject_fault("disconnect", at_s=0.05)
+    assert c.read()[0] and c.isOpened()
+    clock.advance_to(0.06)
+    assert c.read() == (False, None) and not c.isOpened()
