@@ -103,6 +103,10 @@ class Section:
             out[name] = float(strength)
         return out
 
+    def mark_used(self, *keys: str) -> None:
+        """Keys that are valid here even when this run does not read them (e.g. a port the simulator replaces)."""
+        self._used.update(keys)
+
     def check_no_unknown_keys(self) -> None:
         unknown = sorted(set(self.data) - self._used)
         if unknown:

@@ -97,27 +97,55 @@ def load_rig(
     seed: int | None = None,
     fixture: str = "leg",
     record_traffic: Callable[..., None] | None = None,
+    faults: list[str] | None = None,
+    model_overrides: dict[str, dict[str, Any]] | None = None,
 ) -> Rig:
-    """Build the rig a file describes. `design`, `layers`, `effects` and `seed` override the file's [sim] table
-    on a simulated rig (and are recorded as metadata on a real one)."""
+    """Build the rig a file describes. `faults` ('device:fault@time_s') are injected on a simulated rig. On a
+    simulated rig, `design`, `layers`, `effects` and `seed` override the
+    file's [sim] table and the devices are the real drivers talking to the simulated bench's emulators."""
     path = Path(path)
     doc = load_toml(path)
-    rig_section = section(doc, str(path), "rig")
+    source = str(path)
+    rig_section = section(doc, source, "rig")
     kind = rig_section.str("kind", "real", choices=("real", "sim"))
+    name = rig_section.str("name", path.stem)
+    limits = read_limits(rig_section)
+    rig_section.check_no_unknown_keys()
+    bench = None
+    ports: dict[str, Any] = {}
     if kind == "sim":
-        builder = load_builder("sim_devices.rig_builder:build_sim_rig")
+        make_bench = load_builder("sim_devices.rig_sim:make_bench")
+        bench = make_bench(doc, source, design=design, layers=layers, effects=effects, seed=seed, fixture=fixture,
+                           faults=faults, **({"model_overrides": model_overrides} if model_overrides else {}))
+        ports, clock = bench.ports(), bench.clock
     else:
-        builder = load_builder("drivers.rig_builder:build_real_rig")
-    return builder(
-        doc,
-        source=str(path),
-        source_text=path.read_text(encoding="utf-8"),
-        design=design,
-        layers=layers,
-        effects=effects,
-        seed=seed,
-        fixture=fixture,
-        record_traffic=record_traffic,
+        if faults:
+            raise ConfigError("--fault is for the simulated bench only (use --sim)")
+        if model_overrides:
+            raise ConfigError("model parameter overrides are for the simulated bench only (use --sim)")
+        from hamr_bench.clock import RealClock
+
+        clock = RealClock()
+    build_devices = load_builder("drivers.rig_builder:build_devices")
+    try:
+        devices = build_devices(doc, source, clock, ports, fixture, limits, record_traffic)
+    except BaseException:
+        if bench is not None:
+            bench.close()
+        raise
+    settings: dict[str, Any] = {}
+    if bench is not None:
+        settings["model_params"] = bench.truth()
+        settings["params_set"] = bench.settings.params_set
+        settings["run_metadata"] = {"sim_design": bench.settings.design, "sim_layers": bench.settings.layers,
+                                    "sim_seed": bench.settings.seed}
+    return Rig(
+        name=name, source_path=source, source_text=path.read_text(encoding="utf-8"), clock=clock,
+        stage=devices["stage"], force_sensor=devices["force_sensor"], amp_bias=devices["amp_bias"],
+        amp_drive=devices["amp_drive"], limits=limits, camera=devices["camera"], track_px=devices["track_px"],
+        metres_per_pixel=devices["metres_per_pixel"], displacement_sign=devices["displacement_sign"],
+        stage_toward_leg_sign=devices["stage_toward_leg_sign"], is_simulated=bench is not None, bench=bench,
+        settings=settings,
     )
 
 

@@ -14,8 +14,8 @@ from hamr_bench.protocols.plan import FindContact, Home, Tare
 @dataclass(frozen=True)
 class ContactParams:
     threshold_N: float = 0.4e-3
-    coarse_step_m: float = 25e-6
-    fine_step_m: float = 2e-6
+    coarse_step_m: float = 50e-6
+    fine_step_m: float = 5e-6
     max_travel_m: float = 8e-3
 
     def validate(self) -> None:

@@ -222,17 +222,41 @@ class Runner:
             position += sign * msg.coarse_step_m
             self._move_in_safe_steps(position)
             force = self._mean_force(FORCE_WINDOW_S)
-        # Back off until contact is released: the last position still touching is zero sag.
+        # Back off in fine steps until contact is released, keeping the (position, force) pairs in contact; the
+        # zero-sag point is where a straight line through them reaches zero force (the leg is linear over a few
+        # steps), which is finer than the step and not biased by the release threshold.
         release_N = msg.threshold_N / 4
+        touching = [(position, force)]
         backed = 0.0
-        while force > release_N and backed < 2 * msg.coarse_step_m + msg.threshold_N:
+        while force > release_N and backed < 2 * msg.coarse_step_m + msg.max_travel_m:
             position -= sign * msg.fine_step_m
             backed += msg.fine_step_m
             self._move_in_safe_steps(position)
             force = self._mean_force(FORCE_WINDOW_S)
+            if force > release_N:
+                touching.append((position, force))
+        zero_sag_m = self._extrapolate_zero_force(touching, fallback_m=position + sign * msg.fine_step_m,
+                                                  window_m=2 * msg.coarse_step_m)
+        low, high = self.rig.stage.limits_m
+        zero_sag_m = min(max(zero_sag_m, low), high)
+        self._move_in_safe_steps(zero_sag_m)
+        position = zero_sag_m
         self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
                     stage_position_m=position)
         return position
+
+    @staticmethod
+    def _extrapolate_zero_force(points: list[tuple[float, float]], fallback_m: float, window_m: float) -> float:
+        positions = np.array([p for p, _ in points])
+        forces = np.array([f for _, f in points])
+        if len(points) < 3 or np.ptp(positions) == 0:
+            return fallback_m
+        slope, intercept = np.polyfit(positions, forces, 1)
+        if slope == 0 or not np.isfinite(slope):
+            return fallback_m
+        estimate = -intercept / slope
+        # Trust the line only near the last position that still touched (noise can tilt a short line badly).
+        return float(estimate) if abs(estimate - positions[-1]) <= window_m else fallback_m
 
     def _set_voltages(self, msg: SetVoltages) -> None:
         # Order the ramps so the foot moves away from the sensor first: lower the drive before the bias.

@@ -1,0 +1,296 @@
+"""The lift powertrain: actuator + serial compliance + slider-crank + flexures + leg, solved quasi-statically.
+
+Single degree of freedom, the crank angle theta. Potential energy (paper eqs. 1-4 integrated):
+
+    U(theta) = 1/2 A k_act (delta_tra(theta) - u)^2 + 1/2 sum_i kappa_i Phi_i(theta)^2 + 1/2 k_sw eps^2 (theta - theta_fab)^2
+
+with u = F_piezo / k_act the actuator's free tip deflection for the drive (bias-drive-ground), A = 1/(1 + k_act/k_ser),
+delta_tra the transmission input (positive toward the hip, the direction V_drive = V_bias pushes), and the last term
+only for the 2-DOF design (swing chain coupled by eps). Eliminating the internal actuator deflection
+delta_act = (k_act u + k_ser delta_tra)/(k_act + k_ser) gives the series spring A k_act.
+
+Foot height h(theta) is positive up. A support holding the foot at h feels the downward force
+
+    F = U'(theta) / h'(theta)
+      = [A k_act (u - delta_tra) - sum_i kappa_i Phi_i dPhi_i/d delta_tra] / R_tra          (paper eq. 4)
+
+(the paper prints "+" on the flexure terms; with Phi measured from the straight flexure the virtual work of a
+restoring spring is "-"; tests check a stiffer flexure resists motion). Heights are reported from the undriven
+neutral theta_n (U'(theta_n) = 0 at u = 0), which for a biased design is already rotated away from theta_fab.
+
+Holding the foot fixes theta, so foot_force_N is closed form. Free and loaded equilibria are solved vectorised: G(theta)
+on a coarse grid across the linkage's range, the stable crossing (G from - to +) nearest the neutral, then bisection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from hamr_bench.errors import ModelError
+from hamr_bench.model import actuator as act
+from hamr_bench.model import transmission as tr
+from hamr_bench.model.actuator import ActuatorParams, actuator_preset
+from hamr_bench.model.designs import DesignParams, design_preset
+from hamr_bench.model.effects import Effect, active, apply_voltage_series
+
+DEFAULT_VOLTAGE_LIMIT_V = 250.0
+_GRID_POINTS = 97
+_ILLINOIS_STEPS = 40
+
+
+class Powertrain:
+    """One lift powertrain (actuator + design) with optional effects. All methods broadcast over numpy arrays."""
+
+    def __init__(self, actuator: ActuatorParams, design: DesignParams, effects: Sequence[Effect] = (),
+                 voltage_limit_V: float = DEFAULT_VOLTAGE_LIMIT_V) -> None:
+        self.effects = tuple(effects)
+        self.voltage_limit_V = float(voltage_limit_V)
+        for e in active(self.effects, "actuator_params"):
+            actuator = e.actuator_params(actuator)
+        for e in active(self.effects, "design_params"):
+            design = e.design_params(design)
+        self.actuator = actuator
+        self.design = design
+        self.geometry = design.geometry
+        self.coupler_m = design.coupler_m
+        self._plate_effects = active(self.effects, "plate_voltage")
+        self._force_effects = active(self.effects, "foot_force")
+
+        self.k_act_N_per_m = act.stiffness_N_per_m(actuator)
+        k_ser = design.k_ser_N_per_m
+        for e in active(self.effects, "serial_stiffness"):
+            k_ser = e.serial_stiffness(k_ser, actuator)
+        self.k_ser_N_per_m = float(k_ser)
+        self.A = 1.0 / (1.0 + self.k_act_N_per_m / self.k_ser_N_per_m)
+        self.k_eff_N_per_m = self.A * self.k_act_N_per_m
+        self.kappa = np.asarray(design.kappa_N_m_per_rad, dtype=float)
+
+        g = self.geometry
+        # Swing chain rotational stiffness at its own crank (undriven, unbiased copy of this transmission).
+        if design.swing:
+            dd = float(tr.ddelta_tra_dtheta(g, g.coupler_m, g.theta_fab_rad))
+            dphi = tr.joint_dangles_dtheta(g, g.coupler_m, g.theta_fab_rad)
+            self.k_swing_N_m_per_rad = self.k_eff_N_per_m * dd**2 + float(np.sum(self.kappa * dphi**2))
+            self.k_swing_coupled = self.k_swing_N_m_per_rad * design.swing_coupling**2
+        else:
+            self.k_swing_N_m_per_rad = 0.0
+            self.k_swing_coupled = 0.0
+
+        self._x_ref = tr.reference_slider_x_m(g)
+        self._psi_fab = float(tr.coupler_angle_rad(g, self.coupler_m, g.theta_fab_rad))
+        self._has_flex = bool(np.any(self.kappa != 0) or self.k_swing_coupled != 0)
+        self._theta_lo, self._theta_hi = self._operating_range()
+        self._grid = np.linspace(self._theta_lo, self._theta_hi, _GRID_POINTS)
+        th_n = self._solve(np.zeros(1), np.zeros(1), g.theta_fab_rad)[0]
+        if not np.isfinite(th_n):
+            raise ModelError(f"design {design.design}: no stable undriven equilibrium with this geometry and bias "
+                             f"(bias_m={design.bias_m:.4g})")
+        self.theta_neutral_rad = float(th_n)
+        self._h_neutral_fab = float(tr.foot_height_fab_m(g, th_n))
+
+    # --- pipeline stages -----------------------------------------------------------------------------------
+    def _voltage_map(self, v: np.ndarray) -> np.ndarray:
+        for e in self._plate_effects:
+            v = e.plate_voltage(v, self.actuator)
+        return v
+
+    def check_voltage(self, voltage_V: ArrayLike, name: str = "voltage_V") -> np.ndarray:
+        v = np.asarray(voltage_V, dtype=float)
+        if np.any(~np.isfinite(v)):
+            raise ModelError(f"{name} must be finite")
+        if np.any(np.abs(v) > self.voltage_limit_V):
+            raise ModelError(f"{name}={float(np.max(np.abs(v))):.6g} V exceeds the configured limit "
+                             f"{self.voltage_limit_V:g} V")
+        return v
+
+    def free_actuator_deflection_m(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike) -> np.ndarray:
+        """u: the bare actuator's free tip deflection for this drive (after field effects)."""
+        vb = self.check_voltage(v_bias_V, "v_bias_V")
+        vd = self.check_voltage(v_drive_V, "v_drive_V")
+        if self._plate_effects:
+            return act.free_tip_deflection_m(self.actuator, vb, vd, self._voltage_map)
+        return act.free_tip_deflection_m(self.actuator, vb, vd)
+
+    def apply_voltage_series(self, time_s: ArrayLike, v_bias_V: ArrayLike, v_drive_V: ArrayLike):
+        """Memory effects (hook `voltage_series`) on a time series; feed the result to the quasi-static methods."""
+        return apply_voltage_series(self.effects, time_s, v_bias_V, v_drive_V)
+
+    def _out(self, force_N: np.ndarray) -> np.ndarray:
+        for e in self._force_effects:
+            force_N = e.foot_force(force_N)
+        return force_N
+
+    # --- energy and its derivative -------------------------------------------------------------------------
+    def energy_J(self, theta_rad: ArrayLike, u_m: ArrayLike) -> np.ndarray:
+        """Stored energy U(theta) for actuator free deflection u (J)."""
+        g, c = self.geometry, self.coupler_m
+        th = np.asarray(theta_rad, dtype=float)
+        d = tr.delta_tra_m(g, c, th)
+        phi = tr.joint_angles_rad(g, c, th)
+        flex = 0.5 * np.tensordot(self.kappa, phi**2, axes=1)
+        sw = 0.5 * self.k_swing_coupled * (th - g.theta_fab_rad) ** 2
+        return 0.5 * self.k_eff_N_per_m * (d - np.asarray(u_m)) ** 2 + flex + sw
+
+    def _flex_torque(self, th: np.ndarray) -> np.ndarray:
+        g, c = self.geometry, self.coupler_m
+        phi = tr.joint_angles_rad(g, c, th)
+        dphi = tr.joint_dangles_dtheta(g, c, th)
+        return np.tensordot(self.kappa, phi * dphi, axes=1) + self.k_swing_coupled * (th - g.theta_fab_rad)
+
+    def denergy_dtheta(self, theta_rad: ArrayLike, u_m: ArrayLike) -> np.ndarray:
+        """U'(theta) (N m / rad)."""
+        g, c = self.geometry, self.coupler_m
+        th = np.asarray(theta_rad, dtype=float)
+        d = tr.delta_tra_m(g, c, th)
+        dd = tr.ddelta_tra_dtheta(g, c, th)
+        return self.k_eff_N_per_m * (d - np.asarray(u_m)) * dd + self._flex_torque(th)
+
+    # --- solver ------------------------------------------------------------------------------------------------
+    def _operating_range(self) -> tuple[float, float]:
+        """Contiguous crank range around theta_fab where the (biased) linkage closes, on one monotone branch."""
+        g, c = self.geometry, self.coupler_m
+        th = np.linspace(g.theta_fab_rad - 1.4, g.theta_fab_rad + 1.4, 2801)
+        s = g.crank_m * np.sin(th) - g.offset_m
+        ok = np.abs(s) < 0.995 * c
+        dd = tr.ddelta_tra_dtheta(g, c, np.where(ok, th, g.theta_fab_rad))
+        ok &= dd > 0   # one monotone branch of the slider-crank: between the two toggle points
+        i0 = int(np.argmin(np.abs(th - g.theta_fab_rad)))
+        if not ok[i0]:
+            raise ModelError(f"design {self.design.design}: transmission geometry cannot close or is at a toggle "
+                             f"at theta_fab (coupler_m={c:.6g}, crank_m={g.crank_m:.6g}, offset_m={g.offset_m:.6g})")
+        lo = i0
+        while lo > 0 and ok[lo - 1]:
+            lo -= 1
+        hi = i0
+        while hi < th.size - 1 and ok[hi + 1]:
+            hi += 1
+        return float(th[lo]), float(th[hi])
+
+    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray) -> np.ndarray:
+        """U'(theta) - load h'(theta), one fused pass (same equations as transmission.py, constants cached)."""
+        g = self.geometry
+        r, e, l = g.crank_m, g.offset_m, self.coupler_m
+        sn, cs = np.sin(th), np.cos(th)
+        s = r * sn - e
+        q = np.sqrt(l * l - s * s)
+        delta = self._x_ref - r * cs - q
+        ddelta = r * sn + s * r * cs / q
+        phi3 = th - g.theta_fab_rad
+        out = self.k_eff_N_per_m * (delta - u) * ddelta - load * (-g.leg_length_m * np.cos(g.leg_angle0_rad + phi3))
+        if self._has_flex:
+            dpsi = -r * cs / q
+            phi1 = -np.arcsin(s / l) - self._psi_fab
+            k1, k2, k3 = self.kappa
+            out = out + k1 * phi1 * dpsi + k2 * (phi3 - phi1) * (1.0 - dpsi) + (k3 + self.k_swing_coupled) * phi3
+        return out
+
+    def _solve(self, u_m: np.ndarray, load_N: np.ndarray, theta_start: float, stops: bool = False) -> np.ndarray:
+        """Stable root of U'(theta) - load h'(theta) nearest theta_start, vectorised; nan where none exists.
+
+        With `stops`, an input pushed beyond the branch's end rests at the end (the linkage's dead point).
+        """
+        u, load = np.broadcast_arrays(np.asarray(u_m, float), np.asarray(load_N, float))
+        shape = u.shape
+        u = u.reshape(-1, 1)
+        load = load.reshape(-1, 1)
+        grid = self._grid
+        Gg = self._G(grid[None, :], u, load)                       # (N, M)
+        stable = (Gg[:, :-1] < 0) & (Gg[:, 1:] >= 0)
+        mid = 0.5 * (grid[:-1] + grid[1:])
+        dist = np.where(stable, np.abs(mid - theta_start)[None, :], np.inf)
+        j = np.argmin(dist, axis=1)
+        rows = np.arange(dist.shape[0])
+        found = np.isfinite(dist[rows, j])
+        lo = grid[j].copy()
+        hi = grid[j + 1].copy()
+        glo = Gg[rows, j]
+        ghi = Gg[rows, j + 1]
+        u1 = u[:, 0]
+        l1 = load[:, 0]
+        # Illinois (modified regula falsi) inside the bracket: superlinear, never leaves it.
+        side = np.zeros(lo.shape, dtype=int)
+        m = m_prev = lo
+        for _ in range(_ILLINOIS_STEPS):
+            denom = np.where(found, ghi - glo, 1.0)
+            m = np.where(found, (lo * ghi - hi * glo) / denom, lo)
+            m = np.clip(m, np.minimum(lo, hi), np.maximum(lo, hi))
+            gm = self._G(m, u1, l1)
+            neg = gm < 0
+            # keep the sign-change bracket; halve the stale end's value when the same side moves twice
+            glo_new = np.where(neg, gm, np.where(side == 1, 0.5 * glo, glo))
+            ghi_new = np.where(neg, np.where(side == -1, 0.5 * ghi, ghi), gm)
+            lo = np.where(neg, m, lo)
+            hi = np.where(neg, hi, m)
+            glo, ghi = glo_new, ghi_new
+            side = np.where(neg, -1, 1)
+            if _ > 2 and np.all(np.abs(m - m_prev) <= 1e-14):
+                break
+            m_prev = m
+        out = np.where(found, m, np.nan)
+        if stops:
+            # Driven past the end of the branch: the slider-crank reaches its dead point (input at maximum travel)
+            # and locks there. Only when no interior equilibrium exists and the push is toward that end.
+            at_hi = ~found & (Gg[:, -1] < 0) & (Gg[:, 0] < 0)
+            at_lo = ~found & (Gg[:, 0] > 0) & (Gg[:, -1] > 0)
+            out = np.where(at_hi, grid[-1], np.where(at_lo, grid[0], out))
+        return out.reshape(shape)
+
+    # --- public quasi-static primitives ------------------------------------------------------------------------
+    def foot_height_m(self, theta_rad: ArrayLike) -> np.ndarray:
+        """Foot height from the undriven neutral (positive up) at crank angle theta."""
+        return tr.foot_height_fab_m(self.geometry, theta_rad) - self._h_neutral_fab
+
+    def theta_at_height(self, foot_height_m: ArrayLike) -> np.ndarray:
+        return tr.theta_from_foot_height(self.geometry, np.asarray(foot_height_m, float) + self._h_neutral_fab)
+
+    def foot_force_N(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike, foot_height_m: ArrayLike) -> np.ndarray:
+        """Downward force on a rigid support holding the foot at foot_height_m (from neutral, positive up).
+
+        Negative means the leg would pull away. nan where that height is outside the linkage's range.
+        """
+        u = self.free_actuator_deflection_m(v_bias_V, v_drive_V)
+        th = self.theta_at_height(foot_height_m)
+        inside = (th >= self._theta_lo) & (th <= self._theta_hi)
+        th_safe = np.where(inside, th, self.theta_neutral_rad)
+        f = self._G(th_safe, u, 0.0) / tr.dfoot_height_dtheta(self.geometry, th_safe)
+        return self._out(np.where(inside, f, np.nan))
+
+    def blocked_force_N(self, voltage_V: ArrayLike, sag_m: ArrayLike = 0.0) -> np.ndarray:
+        """Paper test: V_bias = V_drive = voltage, sensor raised by sag_m above the foot's undriven neutral."""
+        return self.foot_force_N(voltage_V, voltage_V, sag_m)
+
+    def free_foot_height_m(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike) -> np.ndarray:
+        """Foot height (from neutral, positive up) with nothing touching the foot."""
+        u = self.free_actuator_deflection_m(v_bias_V, v_drive_V)
+        th = self._solve(u, np.zeros_like(u), self.theta_neutral_rad, stops=True)
+        return self.foot_height_m(th)
+
+    def free_displacement_m(self, voltage_V: ArrayLike) -> np.ndarray:
+        """Leg stroke, ONE-SIDED: downward travel of the free foot from neutral at V_drive = V_bias = voltage."""
+        return -self.free_foot_height_m(voltage_V, voltage_V)
+
+    def static_displacement_m(self, force_N: ArrayLike) -> np.ndarray:
+        """Actuator undriven: how far the foot is pushed up (the sag, >= 0 for a downward load) by force_N."""
+        f = np.asarray(force_N, dtype=float)
+        th = self._solve(np.zeros_like(f), f, self.theta_neutral_rad)
+        return self.foot_height_m(th)
+
+    # --- diagnostics -----------------------------------------------------------------------------------------------
+    def transmission_ratio(self, foot_height_m: ArrayLike = 0.0) -> np.ndarray:
+        return tr.transmission_ratio(self.geometry, self.coupler_m, self.theta_at_height(foot_height_m))
+
+    def leg_stiffness_N_per_m(self, foot_height_m: ArrayLike = 0.0, step_m: float = 1e-6) -> np.ndarray:
+        """dF/dh of the undriven leg (N/m): how fast the support force grows as the foot is pushed up (sag)."""
+        h = np.asarray(foot_height_m, float)
+        return (self.foot_force_N(0.0, 0.0, h + step_m) - self.foot_force_N(0.0, 0.0, h - step_m)) / (2 * step_m)
+
+
+def powertrain(design: int, layers: int = 2, params: str = "effective", effects: Sequence[Effect] = (),
+               voltage_limit_V: float = DEFAULT_VOLTAGE_LIMIT_V, **design_kwargs) -> Powertrain:
+    """Factory: the paper's powertrain for `design` (1..5) with the `layers`-layer actuator."""
+    return Powertrain(actuator_preset(layers, params), design_preset(design, **design_kwargs), effects,
+                      voltage_limit_V)

@@ -1,0 +1,77 @@
+"""Turning camera frames (numpy arrays) into the bytes of a `foxglove.CompressedImage`, and back.
+
+PNG is written here directly, with the image rows stored (deflate level 0, no PNG filter): lossless and about 0.3 ms
+for a 640x480 frame, where a compressing PNG encoder costs 2.5-6 ms, more than the recorder's whole CPU budget at
+100 fps. The file's chunk compression then does the squeezing. JPEG (lossy, small) goes through OpenCV.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+import numpy as np
+
+from hamr_bench.errors import RecordingError
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# PNG colour types: 0 grey, 2 RGB.
+_PNG_COLOUR = {1: 0, 3: 2}
+
+
+def _png_chunk(tag: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(data, zlib.crc32(tag)))
+
+
+def encode_png_stored(image: np.ndarray) -> bytes:
+    """A valid PNG of a grey (H, W) or RGB (H, W, 3) uint8/uint16 image, rows stored uncompressed."""
+    if image.ndim == 2:
+        channels = 1
+    elif image.ndim == 3 and image.shape[2] == 3:
+        channels = 3
+    else:
+        raise RecordingError(f"image of shape {image.shape} cannot be written as PNG (expected HxW or HxWx3)")
+    if image.dtype == np.uint8:
+        bit_depth = 8
+        pixels = image
+    elif image.dtype == np.uint16:
+        bit_depth = 16
+        pixels = image.astype(">u2", copy=False)  # PNG stores 16-bit samples big-endian
+    else:
+        raise RecordingError(f"image dtype {image.dtype} cannot be written as PNG (expected uint8 or uint16)")
+    height, width = image.shape[:2]
+    row_bytes = width * channels * pixels.dtype.itemsize
+    raw = np.zeros((height, row_bytes + 1), dtype=np.uint8)  # column 0: filter type 0 (none) per row
+    raw[:, 1:] = np.ascontiguousarray(pixels).view(np.uint8).reshape(height, row_bytes)
+    header = struct.pack(">IIBBBBB", width, height, bit_depth, _PNG_COLOUR[channels], 0, 0, 0)
+    return b"".join(
+        (
+            _PNG_SIGNATURE,
+            _png_chunk(b"IHDR", header),
+            _png_chunk(b"IDAT", zlib.compress(raw.data, 0)),
+            _png_chunk(b"IEND", b""),
+        )
+    )
+
+
+def encode_image(image: np.ndarray, image_format: str) -> bytes:
+    if image_format == "png":
+        return encode_png_stored(image)
+    if image_format in ("jpeg", "jpg"):
+        import cv2
+
+        ok, buffer = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        if not ok:
+            raise RecordingError(f"OpenCV could not encode an image of shape {image.shape} as JPEG")
+        return buffer.tobytes()
+    raise RecordingError(f"image format {image_format!r} is not supported for arrays (use 'png' or 'jpeg')")
+
+
+def decode_image(data: bytes) -> np.ndarray:
+    """Pixels of PNG or JPEG bytes (grey stays 2-D; colour comes back in OpenCV's BGR order)."""
+    import cv2
+
+    pixels = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if pixels is None:
+        raise RecordingError("image bytes could not be decoded (not PNG/JPEG, or corrupted)")
+    return pixels

@@ -1,0 +1,215 @@
+"""The message schemas of a hamr-bench recording: which topic carries which protobuf message, and how each is
+encoded and decoded.
+
+Every stream is protobuf with its schema stored in the file (a serialised `FileDescriptorSet`, built here at run
+time from `descriptor_pb2`, so no `protoc` is needed and any MCAP reader can decode it). Scalar streams are flat
+messages of `double` fields whose first field is `time_s`; one message per sample, so Foxglove plots
+`/force.force_N` against `log_time` with no configuration. Because a flat message of doubles has a fixed wire
+layout (tag byte, 8 little-endian bytes, per field), scalars are encoded and decoded with `struct`/numpy instead of
+protobuf objects: the bytes are ordinary protobuf (the tests check them against the real protobuf classes), only
+about 25 times cheaper to produce. `docs/log-format.md` is the human-readable form of this module.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Callable
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+from hamr_bench.errors import RecordingError
+
+PACKAGE = "hamr_bench"
+IMAGE_SCHEMA = "foxglove.CompressedImage"
+EVENT_SCHEMA = f"{PACKAGE}.Event"
+TRAFFIC_SCHEMA = f"{PACKAGE}.SerialTraffic"
+EVENTS_TOPIC = "/events"
+TRAFFIC_PREFIX = "/traffic/"
+
+_FDP = descriptor_pb2.FieldDescriptorProto
+# Only field numbers 1..15 have a one-byte tag; the fixed-layout fast path relies on that.
+MAX_SCALAR_FIELDS = 15
+
+
+@dataclass(frozen=True)
+class ScalarSchema:
+    """A flat protobuf message: `time_s` then `fields`, all `double`, numbered 1, 2, 3, ..."""
+
+    name: str
+    fields: tuple[str, ...]
+
+    @property
+    def all_fields(self) -> tuple[str, ...]:
+        return ("time_s", *self.fields)
+
+    @property
+    def struct(self) -> struct.Struct:
+        """Wire layout: for each field a tag byte ((number << 3) | 1 = 64-bit) then the double."""
+        return _scalar_struct(len(self.all_fields))
+
+    @property
+    def tags(self) -> tuple[int, ...]:
+        return tuple(((i + 1) << 3) | 1 for i in range(len(self.all_fields)))
+
+    def descriptor_set(self) -> bytes:
+        return _message_descriptor_set(self.name, [(name, _FDP.TYPE_DOUBLE) for name in self.all_fields])
+
+    def packer(self) -> Callable[[float, dict[str, float]], bytes]:
+        """A function (time_s, {field: value}) -> protobuf bytes; raises KeyError on a missing or extra field and
+        struct.error on a value that is not a number. One- and two-value topics get a specialised function
+        because they carry nearly every sample (10 kHz force)."""
+        pack = self.struct.pack
+        names = self.fields
+        n = len(names)
+        if n == 1:
+            (name,) = names
+
+            def pack1(time_s: float, fields: dict[str, float]) -> bytes:
+                if len(fields) != 1:
+                    raise KeyError(name)
+                return pack(9, time_s, 17, fields[name])
+
+            return pack1
+        tags = self.tags[1:]
+
+        def pack_n(time_s: float, fields: dict[str, float]) -> bytes:
+            if len(fields) != n:
+                raise KeyError(names)
+            args: list[float] = [9, time_s]
+            for tag, name in zip(tags, names):
+                args.append(tag)
+                args.append(fields[name])
+            return pack(*args)
+
+        return pack_n
+
+
+@lru_cache(maxsize=None)
+def _scalar_struct(n_fields: int) -> struct.Struct:
+    return struct.Struct("<" + "Bd" * n_fields)
+
+
+# The documented scalar streams (docs/log-format.md). Topics sharing a field set share a schema.
+FORCE = ScalarSchema(f"{PACKAGE}.Force", ("force_N",))
+STAGE_POSITION = ScalarSchema(f"{PACKAGE}.StagePosition", ("position_m",))
+STAGE_COMMAND = ScalarSchema(f"{PACKAGE}.StageCommand", ("target_m",))
+VOLTAGE = ScalarSchema(f"{PACKAGE}.Voltage", ("voltage_V",))
+CAMERA_DISPLACEMENT = ScalarSchema(f"{PACKAGE}.CameraDisplacement", ("displacement_m", "x_px", "y_px"))
+
+KNOWN_SCALAR_TOPICS: dict[str, ScalarSchema] = {
+    "/force": FORCE,
+    "/stage/position": STAGE_POSITION,
+    "/stage/command": STAGE_COMMAND,
+    "/amplifier/bias/command": VOLTAGE,
+    "/amplifier/drive/command": VOLTAGE,
+    "/amplifier/bias/monitor": VOLTAGE,
+    "/amplifier/drive/monitor": VOLTAGE,
+    "/camera/displacement": CAMERA_DISPLACEMENT,
+}
+
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_TOPIC = re.compile(r"^/[A-Za-z0-9_]+(/[A-Za-z0-9_]+)*$")
+
+
+def check_topic(topic: str) -> None:
+    if not isinstance(topic, str) or not _TOPIC.match(topic):
+        raise RecordingError(
+            f"topic {topic!r} is not a valid topic (expected '/name' or '/a/b', letters, digits, _)"
+        )
+
+
+def scalar_schema_for(topic: str, field_names: tuple[str, ...]) -> ScalarSchema:
+    """The schema a scalar topic uses: the documented one for a known topic (its fields must match), or one made
+    from the field names for any other topic (`hamr_bench.Scalar_<fields>`)."""
+    check_topic(topic)
+    known = KNOWN_SCALAR_TOPICS.get(topic)
+    if known is not None:
+        if set(field_names) != set(known.fields):
+            raise RecordingError(
+                f"topic {topic} takes fields {', '.join(known.fields)}; got {', '.join(field_names) or 'none'}"
+            )
+        return known
+    if topic == EVENTS_TOPIC or topic.startswith(TRAFFIC_PREFIX) or topic.startswith("/camera/image"):
+        raise RecordingError(f"topic {topic} is reserved for events, traffic or images, not scalars")
+    if not field_names:
+        raise RecordingError(f"topic {topic}: a scalar sample needs at least one field (e.g. force_N=0.1)")
+    if len(field_names) + 1 > MAX_SCALAR_FIELDS:
+        raise RecordingError(f"topic {topic}: at most {MAX_SCALAR_FIELDS - 1} fields per scalar topic")
+    for name in field_names:
+        if not _IDENT.match(name) or name == "time_s":
+            raise RecordingError(f"topic {topic}: field name {name!r} is not allowed")
+    return ScalarSchema(f"{PACKAGE}.Scalar_{'_'.join(field_names)}", tuple(field_names))
+
+
+def _message_descriptor_set(full_name: str, fields: list[tuple[str, int]]) -> bytes:
+    package, _, message_name = full_name.rpartition(".")
+    file_proto = descriptor_pb2.FileDescriptorProto(
+        name=f"{package.replace('.', '/')}/{message_name}.proto", package=package, syntax="proto3"
+    )
+    message = file_proto.message_type.add(name=message_name)
+    for number, (name, field_type) in enumerate(fields, start=1):
+        message.field.add(name=name, number=number, type=field_type, label=_FDP.LABEL_OPTIONAL)
+    return descriptor_pb2.FileDescriptorSet(file=[file_proto]).SerializeToString()
+
+
+EVENT_FIELDS = [
+    ("time_s", _FDP.TYPE_DOUBLE),
+    ("step", _FDP.TYPE_INT64),
+    ("kind", _FDP.TYPE_STRING),
+    ("message", _FDP.TYPE_STRING),
+    ("data", _FDP.TYPE_STRING),
+]
+TRAFFIC_FIELDS = [
+    ("time_s", _FDP.TYPE_DOUBLE),
+    ("direction", _FDP.TYPE_STRING),
+    ("data", _FDP.TYPE_BYTES),
+]
+
+
+@lru_cache(maxsize=None)
+def event_descriptor_set() -> bytes:
+    return _message_descriptor_set(EVENT_SCHEMA, EVENT_FIELDS)
+
+
+@lru_cache(maxsize=None)
+def traffic_descriptor_set() -> bytes:
+    return _message_descriptor_set(TRAFFIC_SCHEMA, TRAFFIC_FIELDS)
+
+
+@lru_cache(maxsize=None)
+def image_descriptor_set() -> bytes:
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from mcap_protobuf.schema import build_file_descriptor_set
+
+    return build_file_descriptor_set(CompressedImage).SerializeToString()
+
+
+@lru_cache(maxsize=64)
+def message_class(schema_name: str, descriptor_set: bytes) -> Any:
+    """A protobuf message class for `schema_name`, built from the FileDescriptorSet stored in a file (so files from
+    another version of this code, or another writer, still decode). Raises RecordingError if it cannot be built."""
+    try:
+        fds = descriptor_pb2.FileDescriptorSet.FromString(descriptor_set)
+        pool = descriptor_pool.DescriptorPool()
+        for file_proto in fds.file:
+            pool.Add(file_proto)
+        return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
+    except Exception as exc:  # protobuf raises several unrelated types for a bad descriptor
+        raise RecordingError(f"schema {schema_name}: stored protobuf descriptor is unreadable ({exc})") from None
+
+
+def scalar_fields_from_descriptor(schema_name: str, descriptor_set: bytes) -> tuple[str, ...] | None:
+    """The field names of a flat all-double message whose first field is `time_s` (numbered 1..n), or None if the
+    stored schema is not of that form."""
+    cls = message_class(schema_name, descriptor_set)
+    fields = cls.DESCRIPTOR.fields
+    if not fields or len(fields) > MAX_SCALAR_FIELDS:
+        return None
+    for i, f in enumerate(fields):
+        if f.number != i + 1 or f.type != f.TYPE_DOUBLE or f.is_repeated:
+            return None
+    names = tuple(f.name for f in fields)
+    return names[1:] if names[0] == "time_s" else None

@@ -1,0 +1,621 @@
+"""The run recorder: one MCAP file per run, written by a single writer thread fed through a queue.
+
+Callers (the runner's acquisition loop, a camera thread, the importer) only encode and enqueue, which costs a
+microsecond or so per scalar sample; the writer thread owns the `mcap.writer.Writer` (it has no locks) and the file.
+
+Crash safety: the writer thread closes the open chunk, flushes and `os.fsync`s at least every `flush_interval_s`
+of wall time (not rig time: under the virtual clock an hour-long protocol runs in seconds, and durability is about
+the disk, not the simulation), so a SIGKILL loses at most that much. Metadata is written and fsynced before
+`add_metadata` returns. `recover()` turns the output of a killed writer into a finished file.
+
+Time: `time_s` is seconds on the rig clock since the run start. Each message carries it in a field, and its MCAP
+log_time is `start_time_ns + time_s` in ns. log_time never decreases within a channel: a sample whose time is
+earlier than its channel's previous one (or NaN) keeps its own time in the field but gets the previous log_time,
+and is counted in `run_end`'s `out_of_order_by_topic`. Across channels messages are in arrival order.
+
+Overflow: the queue is bounded (messages and image bytes). With `when_full="drop"` (the default, for real-time
+callers that must never stall) a sample that does not fit is dropped, counted per topic, reported by `stats()` and
+recorded in `run_end`; nothing is dropped silently. With `when_full="block"` (offline writers: importer, replay)
+the caller waits for room instead.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import math
+import os
+import queue
+import struct
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hamr_bench.errors import RecordingError
+from hamr_bench.recording import schemas
+from hamr_bench.recording.images import encode_image
+
+EXIT_STATUSES = ("success", "aborted", "failed")
+FORMAT_NAME = "hamr-bench-recording"
+FORMAT_VERSION = "1"
+COMPRESSIONS = ("lz4", "zstd", "none")
+
+# Writer-thread operations; data items use a channel index >= 0 in the same position.
+_OP_REGISTER, _OP_METADATA, _OP_FLUSH, _OP_CLOSE = -1, -2, -3, -4
+_DRAIN_BATCH = 2048  # items handled between two looks at the flush deadline
+_IDLE_POLL_S = 0.02  # how long the writer thread waits when its queue is empty (latency, not durability)
+_MAX_LOG_NS = 2**63 - 1
+# How long a caller waits for the writer thread to confirm metadata / flush / close before giving up.
+_WRITER_CONFIRM_TIMEOUT_S = 60.0
+
+
+@dataclass(frozen=True)
+class RecorderStats:
+    """Counts per topic so far: written by the writer thread, dropped on a full queue, log_time clamped."""
+
+    written: dict[str, int] = field(default_factory=dict)
+    dropped: dict[str, int] = field(default_factory=dict)
+    out_of_order: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def dropped_total(self) -> int:
+        return sum(self.dropped.values())
+
+
+@dataclass
+class _Channel:
+    """Producer-side view of a channel (immutable after registration)."""
+
+    index: int
+    topic: str
+    schema: schemas.ScalarSchema | None
+    is_image: bool = False
+    pack: Any = None  # scalar channels: (time_s, fields) -> payload bytes
+
+
+def _one_line(exc: BaseException) -> str:
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+class Recorder:
+    """Writes one run to an MCAP file. See docs/log-format.md for what lands in the file."""
+
+    def __init__(
+        self,
+        path: Path | str,
+        *,
+        overwrite: bool = False,
+        flush_interval_s: float = 0.5,
+        chunk_size: int = 256 * 1024,
+        start_time_ns: int | None = None,
+        compression: str = "lz4",
+        max_queue_messages: int = 500_000,
+        max_queue_bytes: int = 256 * 1024 * 1024,
+        when_full: str = "drop",
+    ) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        if not 0 < flush_interval_s <= 1.0:
+            raise RecordingError(f"flush_interval_s={flush_interval_s} must be in (0, 1] s")
+        if when_full not in ("drop", "block"):
+            raise RecordingError(f"when_full={when_full!r} must be 'drop' (real-time callers) or 'block' (offline)")
+        if compression not in COMPRESSIONS:
+            raise RecordingError(f"compression={compression!r} must be one of {', '.join(COMPRESSIONS)}")
+        self.start_time_ns = int(time.time_ns() if start_time_ns is None else start_time_ns)
+        self.flush_interval_s = float(flush_interval_s)
+        self._max_queue_messages = int(max_queue_messages)
+        self._max_queue_bytes = int(max_queue_bytes)
+        self._block_when_full = when_full == "block"
+        try:
+            self._file = open(self.path, "wb" if overwrite else "xb")
+        except FileExistsError:
+            raise RecordingError(f"{self.path} already exists; use --force to overwrite it") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror or exc}") from None
+        _fsync_directory(self.path.parent)
+        self._writer = Writer(
+            self._file,
+            chunk_size=int(chunk_size),
+            compression={"lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD, "none": CompressionType.NONE}[
+                compression
+            ],
+            enable_crcs=True,
+            enable_data_crcs=True,
+        )
+        from hamr_bench import __version__
+
+        self._writer.start(profile="", library=f"hamr-bench {__version__}")
+
+        # Producer side (any thread).
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._wake = threading.Event()  # set for operations a caller waits on
+        self._space = threading.Event()  # set by the writer after draining (when_full='block' waits on it)
+        self._lock = threading.Lock()  # registration, drop counts, image byte accounting
+        self._channels: dict[str, _Channel] = {}
+        self._dropped: Counter[str] = Counter()
+        self._queued_image_bytes = 0
+        self._closed = False  # no more writes accepted
+        self._close_stats: RecorderStats | None = None
+
+        # Writer-thread side, indexed by channel index.
+        self._w_channel_ids: list[int] = []
+        self._w_topics: list[str] = []
+        self._w_is_image: list[bool] = []
+        self._w_last_log: list[int] = []
+        self._w_written: list[int] = []
+        self._w_out_of_order: list[int] = []
+        self._w_schema_ids: dict[str, int] = {}
+        self._failure: BaseException | None = None
+
+        self._thread = threading.Thread(target=self._run, name=f"recorder:{self.path.name}", daemon=True)
+        self._thread.start()
+        start_utc = datetime.fromtimestamp(self.start_time_ns / 1e9, tz=timezone.utc).isoformat()
+        try:
+            self.add_metadata(
+                "recording",
+                {
+                    "format": FORMAT_NAME,
+                    "format_version": FORMAT_VERSION,
+                    "start_time_ns": str(self.start_time_ns),
+                    "start_time_utc": start_utc,
+                    "flush_interval_s": repr(self.flush_interval_s),
+                    "chunk_size": str(int(chunk_size)),
+                    "compression": compression,
+                },
+            )
+        except RecordingError:
+            self._closed = True  # the writer thread has stopped; nothing more to finish
+            raise
+        atexit.register(self._close_at_exit)
+
+    # ------------------------------------------------------------------ producer API
+
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """Write a metadata record now (flushed and fsynced before this returns)."""
+        if not isinstance(name, str) or not name:
+            raise RecordingError(f"metadata name {name!r} must be a non-empty string")
+        for key, value in values.items():
+            if not isinstance(key, str) or not isinstance(value, str):
+                raise RecordingError(f"metadata {name}: key {key!r} and its value must both be strings")
+        self._check_open()
+        done = threading.Event()
+        self._queue.put((_OP_METADATA, None, (name, dict(values), done)))
+        self._wake.set()
+        self._wait_for_writer(done, f"metadata {name}")
+
+    def write_scalar(self, topic: str, time_s: float, **fields: float) -> None:
+        """One sample of a scalar stream, e.g. `write_scalar("/force", t, force_N=0.01)`."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._register_scalar(topic, tuple(fields))
+        try:
+            payload = channel.pack(time_s, fields)
+        except (KeyError, TypeError, ValueError, OverflowError, struct.error):
+            schema = channel.schema
+            if schema is None:
+                raise RecordingError(f"topic {topic} carries images, events or traffic, not scalars") from None
+            raise RecordingError(
+                f"topic {topic}: expected time_s and a number for each of {', '.join(schema.fields)}; "
+                f"got time_s={time_s!r}, {', '.join(f'{k}={v!r}' for k, v in fields.items()) or 'no fields'}"
+            ) from None
+        self._put(channel, time_s, payload)
+
+    def write_event(self, time_s: float, kind: str, step: int, message: str = "", **data: Any) -> None:
+        """A protocol event on /events (`data` is stored as a JSON object)."""
+        channel = self._channels.get(schemas.EVENTS_TOPIC) or self._register_special(
+            schemas.EVENTS_TOPIC, schemas.EVENT_SCHEMA, schemas.event_descriptor_set()
+        )
+        try:
+            data_json = json.dumps(data, sort_keys=True, default=_json_default)
+        except (TypeError, ValueError) as exc:
+            raise RecordingError(f"event {kind!r} at step {step}: data is not JSON serialisable ({exc})") from None
+        cls = schemas.message_class(schemas.EVENT_SCHEMA, schemas.event_descriptor_set())
+        try:
+            payload = cls(
+                time_s=float(time_s), step=int(step), kind=str(kind), message=str(message), data=data_json
+            ).SerializeToString()
+        except (TypeError, ValueError) as exc:
+            raise RecordingError(f"event {kind!r}: bad time_s={time_s!r} or step={step!r} ({exc})") from None
+        self._put(channel, time_s, payload)
+
+    def write_image(
+        self,
+        topic: str,
+        time_s: float,
+        image: np.ndarray | bytes,
+        format: str = "png",  # noqa: A002 - the field is called `format` in foxglove.CompressedImage
+        frame_id: str = "camera",
+    ) -> None:
+        """A camera frame as `foxglove.CompressedImage`. Arrays are encoded here (PNG lossless, or JPEG);
+        bytes are taken as already encoded in `format`."""
+        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
+        schemas.check_topic(topic)
+        channel = self._channels.get(topic) or self._register_special(
+            topic, schemas.IMAGE_SCHEMA, schemas.image_descriptor_set(), is_image=True
+        )
+        if not channel.is_image:
+            raise RecordingError(f"topic {topic} already carries another message type, not images")
+        if isinstance(image, np.ndarray):
+            data = encode_image(image, format)
+        elif isinstance(image, (bytes, bytearray, memoryview)):
+            data = bytes(image)
+        else:
+            raise RecordingError(f"topic {topic}: image must be a numpy array or bytes, not {type(image).__name__}")
+        try:
+            finite = math.isfinite(time_s)
+        except TypeError:
+            finite = False
+        if not finite:
+            raise RecordingError(f"topic {topic}: image time_s={time_s!r} is not a finite time")
+        msg = CompressedImage(frame_id=frame_id, format="jpeg" if format == "jpg" else format, data=data)
+        msg.timestamp.FromNanoseconds(self.start_time_ns + round(time_s * 1e9))
+        payload = msg.SerializeToString()
+        self._put(channel, time_s, payload)
+
+    def write_bytes(self, topic: str, time_s: float, direction: str, data: bytes) -> None:
+        """Raw serial traffic of one device on `/traffic/<device>`; direction 'tx' (to device) or 'rx'."""
+        if not topic.startswith(schemas.TRAFFIC_PREFIX):
+            raise RecordingError(f"traffic topic {topic!r} must start with {schemas.TRAFFIC_PREFIX}")
+        if direction not in ("tx", "rx"):
+            raise RecordingError(f"topic {topic}: direction {direction!r} must be 'tx' or 'rx'")
+        schemas.check_topic(topic)
+        channel = self._channels.get(topic) or self._register_special(
+            topic, schemas.TRAFFIC_SCHEMA, schemas.traffic_descriptor_set()
+        )
+        cls = schemas.message_class(schemas.TRAFFIC_SCHEMA, schemas.traffic_descriptor_set())
+        try:
+            payload = cls(time_s=float(time_s), direction=direction, data=bytes(data)).SerializeToString()
+        except (TypeError, ValueError) as exc:
+            raise RecordingError(f"topic {topic}: bad time_s={time_s!r} or data ({exc})") from None
+        self._put(channel, time_s, payload)
+
+    def flush(self) -> None:
+        """Block until everything queued so far is on disk (fsynced)."""
+        self._check_open()
+        done = threading.Event()
+        self._queue.put((_OP_FLUSH, None, done))
+        self._wake.set()
+        self._wait_for_writer(done, "flush")
+
+    def stats(self) -> RecorderStats:
+        if self._close_stats is not None:
+            return self._close_stats
+        return self._collect_stats()
+
+    def close(self, exit_status: str, reason: str = "") -> RecorderStats:
+        """Write the `run_end` record and finish the file. Idempotent: later calls return the same stats.
+        Stop every producer first: writes racing with close are refused or may be lost."""
+        if exit_status not in EXIT_STATUSES:
+            raise ValueError(f"exit_status {exit_status!r} must be one of {EXIT_STATUSES}")
+        with self._lock:
+            if self._closed:
+                already = True
+            else:
+                already = False
+                self._closed = True
+        if already:
+            self._thread.join(_WRITER_CONFIRM_TIMEOUT_S)
+            if self._close_stats is None:
+                raise RecordingError(f"recording {self.path} could not be finished ({self._failure_text()})")
+            return self._close_stats
+        atexit.unregister(self._close_at_exit)
+        done = threading.Event()
+        self._queue.put((_OP_CLOSE, None, (exit_status, str(reason), done)))
+        self._wake.set()
+        self._wait_for_writer(done, "close")
+        self._thread.join(_WRITER_CONFIRM_TIMEOUT_S)
+        assert self._close_stats is not None
+        return self._close_stats
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: Any) -> None:
+        if self._closed:
+            return
+        if exc is None:
+            self.close("success")
+        elif isinstance(exc, KeyboardInterrupt):
+            self._close_quietly("aborted", "interrupted (Ctrl-C)")
+        else:
+            self._close_quietly("failed", _one_line(exc))
+
+    # ------------------------------------------------------------------ producer internals
+
+    def _check_open(self) -> None:
+        if self._failure is not None:
+            raise RecordingError(f"recording {self.path} failed: {self._failure_text()}")
+        if self._closed:
+            raise RecordingError(f"recording {self.path} is already closed")
+
+    def _failure_text(self) -> str:
+        exc = self._failure
+        if exc is None:
+            return "writer thread stopped"
+        if isinstance(exc, OSError):
+            return exc.strerror or str(exc)
+        return _one_line(exc)
+
+    def _put(self, channel: _Channel, time_s: float, payload: bytes) -> None:
+        if self._closed or self._failure is not None:
+            self._check_open()
+        if channel.is_image:
+            with self._lock:
+                fits = self._image_fits(len(payload))
+                if fits:
+                    self._queued_image_bytes += len(payload)
+        else:
+            fits = self._queue.qsize() < self._max_queue_messages
+        if not fits:
+            if not self._block_when_full:
+                with self._lock:
+                    self._dropped[channel.topic] += 1
+                return
+            self._wait_for_space(channel, len(payload))
+        self._queue.put((channel.index, time_s, payload))
+
+    def _image_fits(self, size: int) -> bool:
+        # An image larger than the whole budget still goes in when nothing else is queued (block mode only).
+        return self._queued_image_bytes + size <= self._max_queue_bytes or (
+            self._block_when_full and self._queued_image_bytes == 0
+        )
+
+    def _wait_for_space(self, channel: _Channel, size: int) -> None:
+        """when_full='block': wait until the writer has made room (offline writers such as the importer)."""
+        while True:
+            self._space.clear()
+            if channel.is_image:
+                with self._lock:
+                    if self._image_fits(size):
+                        self._queued_image_bytes += size
+                        return
+            elif self._queue.qsize() < self._max_queue_messages:
+                return
+            if not self._thread.is_alive():
+                self._check_open()
+                raise RecordingError(f"recording {self.path}: writer stopped ({self._failure_text()})")
+            self._space.wait(0.05)
+
+    def _register_scalar(self, topic: str, field_names: tuple[str, ...]) -> _Channel:
+        schema = schemas.scalar_schema_for(topic, field_names)
+        return self._register(topic, schema.name, schema.descriptor_set(), scalar=schema)
+
+    def _register_special(self, topic: str, schema_name: str, data: bytes, is_image: bool = False) -> _Channel:
+        return self._register(topic, schema_name, data, is_image=is_image)
+
+    def _register(
+        self,
+        topic: str,
+        schema_name: str,
+        descriptor_set: bytes,
+        scalar: schemas.ScalarSchema | None = None,
+        is_image: bool = False,
+    ) -> _Channel:
+        self._check_open()
+        with self._lock:
+            existing = self._channels.get(topic)
+            if existing is not None:
+                return existing
+            if scalar is None and topic in schemas.KNOWN_SCALAR_TOPICS:
+                raise RecordingError(f"topic {topic} is a scalar topic; write it with write_scalar")
+            channel = _Channel(
+                len(self._channels), topic, scalar, is_image, scalar.packer() if scalar is not None else None
+            )
+            # Put under the lock so the registration reaches the writer before any sample of this channel.
+            self._queue.put((_OP_REGISTER, None, (topic, schema_name, descriptor_set, is_image)))
+            self._channels[topic] = channel
+            return channel
+
+    def _wait_for_writer(self, done: threading.Event, what: str) -> None:
+        """Wait until the writer thread has done `what`; give up if it died, or if it made no progress for
+        _WRITER_CONFIRM_TIMEOUT_S (a hung disk), never while it is still working through a backlog."""
+        progress = sum(self._w_written)
+        deadline = time.monotonic() + _WRITER_CONFIRM_TIMEOUT_S
+        while not done.wait(0.1):
+            # The thread ends right after confirming a close: only a dead thread with `done` unset has failed.
+            if not self._thread.is_alive() and not done.is_set():
+                raise RecordingError(f"recording {self.path}: writer stopped before {what} ({self._failure_text()})")
+            now_progress = sum(self._w_written)
+            if now_progress != progress:
+                progress, deadline = now_progress, time.monotonic() + _WRITER_CONFIRM_TIMEOUT_S
+            elif time.monotonic() > deadline:
+                raise RecordingError(
+                    f"recording {self.path}: writer made no progress for {_WRITER_CONFIRM_TIMEOUT_S:.0f} s "
+                    f"while waiting for {what}"
+                )
+        if self._failure is not None:
+            raise RecordingError(f"recording {self.path} failed: {self._failure_text()}")
+
+    def _collect_stats(self) -> RecorderStats:
+        with self._lock:
+            dropped = {k: v for k, v in self._dropped.items() if v}
+        topics = list(self._w_topics)
+        return RecorderStats(
+            written={t: self._w_written[i] for i, t in enumerate(topics)},
+            dropped=dropped,
+            out_of_order={t: self._w_out_of_order[i] for i, t in enumerate(topics) if self._w_out_of_order[i]},
+        )
+
+    def _close_quietly(self, exit_status: str, reason: str) -> None:
+        try:
+            self.close(exit_status, reason)
+        except RecordingError as exc:
+            import warnings
+
+            warnings.warn(f"recording {self.path} could not be closed: {exc}", stacklevel=3)
+
+    def _close_at_exit(self) -> None:
+        if not self._closed:
+            self._close_quietly("failed", "recorder not closed before the program exited")
+
+    # ------------------------------------------------------------------ writer thread
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # the producer side reports it; the file stays recoverable
+            self._failure = exc
+            try:
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            except (OSError, ValueError):
+                pass
+            try:
+                self._file.close()
+            except (OSError, ValueError):
+                pass
+
+    def _loop(self) -> None:
+        q = self._queue
+        add = self._writer.add_message
+        start_ns = self.start_time_ns
+        channel_ids = self._w_channel_ids
+        last_log = self._w_last_log
+        written = self._w_written
+        out_of_order = self._w_out_of_order
+        is_image = self._w_is_image
+        interval = self.flush_interval_s
+        next_flush = time.monotonic() + interval
+        dirty = False
+        wake = self._wake
+        while True:
+            try:
+                item = q.get_nowait()
+            except queue.Empty:
+                # Producers do not signal each sample: waking per sample (a futex and a GIL hand-over each time)
+                # cost more CPU than writing it. Poll every _IDLE_POLL_S instead; operations callers wait for
+                # (metadata, flush, close) set `wake` so they are handled at once.
+                timeout = min(_IDLE_POLL_S, next_flush - time.monotonic())
+                if timeout > 0:
+                    wake.wait(timeout)
+                wake.clear()
+                item = None
+                try:
+                    item = q.get_nowait()
+                except queue.Empty:
+                    pass
+            handled = 0
+            while item is not None:
+                index, time_s, payload = item
+                if index >= 0:
+                    try:
+                        log_ns = start_ns + round(time_s * 1e9)
+                    except (ValueError, OverflowError, TypeError):
+                        log_ns = -1  # NaN / inf time: clamp below
+                    previous = last_log[index]
+                    if log_ns < previous or log_ns > _MAX_LOG_NS:
+                        log_ns = previous
+                        out_of_order[index] += 1
+                    else:
+                        last_log[index] = log_ns
+                    add(channel_ids[index], log_ns, payload, log_ns, 0)
+                    written[index] += 1
+                    if is_image[index]:
+                        with self._lock:
+                            self._queued_image_bytes -= len(payload)
+                    dirty = True
+                elif self._control(index, payload):
+                    return
+                handled += 1
+                if handled >= _DRAIN_BATCH:
+                    break
+                try:
+                    item = q.get_nowait()
+                except queue.Empty:
+                    item = None
+            if handled and self._block_when_full:
+                self._space.set()
+            if time.monotonic() >= next_flush:
+                if dirty:
+                    self._sync()
+                    dirty = False
+                next_flush = time.monotonic() + interval
+
+    def _sync(self) -> None:
+        self._writer.flush()
+        os.fsync(self._file.fileno())
+
+    def _control(self, op: int, arg: Any) -> bool:
+        """Handle a writer operation; True when the file is finished."""
+        if op == _OP_REGISTER:
+            topic, schema_name, descriptor_set, image = arg
+            schema_id = self._w_schema_ids.get(schema_name)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(schema_name, "protobuf", descriptor_set)
+                self._w_schema_ids[schema_name] = schema_id
+            self._w_channel_ids.append(self._writer.register_channel(topic, "protobuf", schema_id))
+            self._w_topics.append(topic)
+            self._w_is_image.append(image)
+            self._w_last_log.append(0)
+            self._w_written.append(0)
+            self._w_out_of_order.append(0)
+            return False
+        if op == _OP_METADATA:
+            name, values, done = arg
+            self._writer.add_metadata(name, values)
+            self._sync()
+            done.set()
+            return False
+        if op == _OP_FLUSH:
+            self._sync()
+            arg.set()
+            return False
+        if op == _OP_CLOSE:
+            exit_status, reason, done = arg
+            self._writer.flush()  # close the last chunk first, so run_end is the last record of the data section
+            stats = self._collect_stats()
+            end_ns = time.time_ns()
+            self._writer.add_metadata(
+                "run_end",
+                {
+                    "exit_status": exit_status,
+                    "reason": reason,
+                    "end_time_ns": str(end_ns),
+                    "end_time_utc": datetime.fromtimestamp(end_ns / 1e9, tz=timezone.utc).isoformat(),
+                    "messages_written": str(sum(stats.written.values())),
+                    "dropped_total": str(stats.dropped_total),
+                    "dropped_by_topic": json.dumps(stats.dropped, sort_keys=True),
+                    "out_of_order_by_topic": json.dumps(stats.out_of_order, sort_keys=True),
+                },
+            )
+            self._writer.finish()
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            self._close_stats = stats
+            done.set()
+            return True
+        raise AssertionError(f"unknown recorder operation {op}")
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make the new file's directory entry durable too (a no-op where directories cannot be opened)."""
+    try:
+        fd = os.open(directory if str(directory) else ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
