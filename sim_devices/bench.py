@@ -272,7 +272,7 @@ class SimBench:
         only asked where there is contact: a surface far from the foot may lie outside the linkage's reach."""
         vb, vd, surface_m = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (vb, vd, surface_m)))
         force = np.zeros(surface_m.shape)
-        vmap = self.powertrain._voltage_map
+        vmap = self.powertrain.plate_voltage_map
         if self.settings.fixture == "leg":
             touching = self.free_foot_height_m(vb, vd) < surface_m
             if touching.any():
@@ -320,7 +320,7 @@ class SimBench:
             return float(-(surface[0] - force[0] * self.sensor_compliance_m_per_N))
         if self.settings.fixture == "leg":
             return float(-self.free_foot_height_m(vb, vd)[0])
-        return float(act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain._voltage_map)[0])
+        return float(act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain.plate_voltage_map)[0])
 
     def marker_px(self, time_s: float) -> tuple[float, float]:
         """Image position of the marker: displacement runs down the image (+y)."""

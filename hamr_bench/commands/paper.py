@@ -7,7 +7,8 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("paper", help="reproduction table of the seed paper's claims (computed by the model)")
+    parser = subparsers.add_parser("paper",
+                                   help="reproduction table of the seed paper's claims (computed by the model)")
     fmt = parser.add_mutually_exclusive_group()
     fmt.add_argument("--json", action="store_true", help="JSON: a list of claims")
     fmt.add_argument("--markdown", action="store_true", help="Markdown (docs/paper-reproduction.md)")

@@ -102,7 +102,8 @@ def validate_actuator(p: ActuatorParams) -> None:
         raise ModelError(f"actuator parameter length_ratio must be >= 0, got {p.length_ratio!r}")
     # The linear taper must keep a positive tip width: w_tip = (2 - w_r) w_nom.
     if not (0 < p.width_ratio < 2):
-        raise ModelError(f"actuator parameter width_ratio must be in (0, 2) (positive tip width), got {p.width_ratio!r}")
+        raise ModelError(f"actuator parameter width_ratio must be in (0, 2) (positive tip width), "
+                         f"got {p.width_ratio!r}")
     if p.layers not in (1, 2, 3):
         raise ModelError(f"actuator parameter layers must be 1, 2 or 3, got {p.layers!r}")
 
@@ -174,7 +175,8 @@ def bending_rigidity_per_width(p: ActuatorParams) -> float:
 def force_per_volt(p: ActuatorParams) -> float:
     """c = F_b / V (N/V), one plate driven."""
     gf = geometric_factor_force(p.width_ratio, p.length_ratio)
-    return 0.75 * p.d31_m_per_V * p.pzt_modulus_Pa * p.width_nom_m * (p.pzt_thickness_m + p.cf_thickness_m) * gf / p.length_m
+    t_sum = p.pzt_thickness_m + p.cf_thickness_m
+    return 0.75 * p.d31_m_per_V * p.pzt_modulus_Pa * p.width_nom_m * t_sum * gf / p.length_m
 
 
 def displacement_per_volt(p: ActuatorParams) -> float:

@@ -2,7 +2,8 @@
 
 Single degree of freedom, the crank angle theta. Potential energy (paper eqs. 1-4 integrated):
 
-    U(theta) = 1/2 A k_act (delta_tra(theta) - u)^2 + 1/2 sum_i kappa_i Phi_i(theta)^2 + 1/2 k_sw eps^2 (theta - theta_fab)^2
+    U(theta) = 1/2 A k_act (delta_tra(theta) - u)^2 + 1/2 sum_i kappa_i Phi_i(theta)^2
+               + 1/2 k_sw eps^2 (theta - theta_fab)^2
 
 with u = F_piezo / k_act the actuator's free tip deflection for the drive (bias-drive-ground), A = 1/(1 + k_act/k_ser),
 delta_tra the transmission input (positive toward the hip, the direction V_drive = V_bias pushes), and the last term
@@ -97,6 +98,15 @@ class Powertrain:
         for e in self._plate_effects:
             v = e.plate_voltage(v, self.actuator)
         return v
+
+    def plate_voltage_map(self, v_plate_V: ArrayLike) -> np.ndarray:
+        """Public form of the per-plate voltage map after field effects (identity when none is active)."""
+        return self._voltage_map(np.asarray(v_plate_V, dtype=float))
+
+    def free_foot_height_at_deflection_m(self, u_m: ArrayLike) -> np.ndarray:
+        """Free foot height (from neutral, positive up) for a given free actuator deflection u (drive-agnostic)."""
+        u = np.asarray(u_m, dtype=float)
+        return self.foot_height_m(self._solve(u, np.zeros_like(u), self.theta_neutral_rad, stops=True))
 
     def check_voltage(self, voltage_V: ArrayLike, name: str = "voltage_V") -> np.ndarray:
         v = np.asarray(voltage_V, dtype=float)

@@ -55,11 +55,13 @@ class SliderCrankGeometry:
 
 def check_closes(g: SliderCrankGeometry, coupler_m: float, theta_rad: ArrayLike) -> None:
     """Raise ModelError if the linkage cannot be assembled (|r sin(theta) - e| >= l) at any given angle."""
-    s = g.crank_m * np.sin(np.asarray(theta_rad, dtype=float)) - g.offset_m
+    th = np.atleast_1d(np.asarray(theta_rad, dtype=float))
+    s = g.crank_m * np.sin(th) - g.offset_m
     if coupler_m <= 0 or np.any(np.abs(s) >= coupler_m):
+        i = int(np.argmax(np.abs(s)))
         raise ModelError(
             f"transmission geometry cannot close: coupler_m={coupler_m:.6g} <= |crank_m sin(theta) - offset_m|="
-            f"{float(np.max(np.abs(s))):.6g} at theta={float(np.atleast_1d(theta_rad)[np.argmax(np.abs(np.atleast_1d(s)))]):.4g} rad")
+            f"{abs(float(s[i])):.6g} at theta={float(th[i]):.4g} rad")
 
 
 def _sq(g: SliderCrankGeometry, coupler_m: float, theta: np.ndarray):
@@ -141,7 +143,8 @@ def theta_from_foot_height(g: SliderCrankGeometry, h_fab_m: ArrayLike) -> np.nda
     h = np.asarray(h_fab_m, dtype=float)
     arg = np.sin(g.leg_angle0_rad) - h / g.leg_length_m
     if np.any(np.abs(arg) > 1):
-        raise ModelError(f"foot height {float(np.max(np.abs(h))):.4g} m is beyond the leg length {g.leg_length_m:.4g} m")
+        raise ModelError(f"foot height {float(np.max(np.abs(h))):.4g} m is beyond the leg length "
+                         f"{g.leg_length_m:.4g} m")
     return np.arcsin(arg) - g.leg_angle0_rad + g.theta_fab_rad
 
 

@@ -22,7 +22,8 @@ def _gf_by_integration(wr: float, lr: float) -> float:
     return (num / den) / 1.5
 
 
-@pytest.mark.parametrize("wr,lr", [(1.5, 0.0), (1.5, 0.0063), (1.2, 0.1), (0.8, 0.05), (1.0, 0.0), (1.0, 0.2), (1.0005, 0.1)])
+@pytest.mark.parametrize("wr,lr", [(1.5, 0.0), (1.5, 0.0063), (1.2, 0.1), (0.8, 0.05), (1.0, 0.0), (1.0, 0.2),
+                                   (1.0005, 0.1)])
 def test_force_geometric_factor_matches_integration(wr, lr):
     assert act.geometric_factor_force(wr, lr) == pytest.approx(_gf_by_integration(wr, lr), rel=1e-6)
 

@@ -15,7 +15,8 @@ def _json(argv, capsys):
 
 
 def test_model_actuator_json(capsys):
-    out = _json(["model", "actuator", "--layers", "3", "--params", "reported", "--voltage", "100", "250", "--json"], capsys)
+    out = _json(["model", "actuator", "--layers", "3", "--params", "reported", "--voltage", "100", "250", "--json"],
+                capsys)
     assert [p["voltage_V"] for p in out["points"]] == [100.0, 250.0]
     keys = {"voltage_V", "blocked_force_N", "free_displacement_m", "stiffness_N_per_m", "mass_kg", "energy_J",
             "energy_density_J_per_kg"}

@@ -161,3 +161,11 @@ def test_fused_solver_residual_matches_readable_energy_derivative(pts, d):
     th = p.theta_neutral_rad + np.linspace(-0.2, 0.2, 9)
     u = 40e-6
     assert np.allclose(p._G(th, u, 0.0), p.denergy_dtheta(th, u), rtol=1e-10, atol=1e-15)
+
+
+def test_free_height_depends_on_drive_only_through_u(pts):
+    p = pts[4]
+    vb, vd = 240.0, np.array([0.0, 60.0, 200.0, 240.0])
+    u = p.free_actuator_deflection_m(vb, vd)
+    assert np.array_equal(p.free_foot_height_at_deflection_m(u), p.free_foot_height_m(vb, vd))
+    assert np.array_equal(p.plate_voltage_map(vd), vd)

@@ -40,7 +40,8 @@ def test_R_tra_and_dphi_ddelta_by_finite_difference_in_delta(design):
     def theta_at(delta, guess):
         t = guess.copy()
         for _ in range(30):
-            t = t - (tr.delta_tra_m(g, c, t) - delta) / ((tr.delta_tra_m(g, c, t + 1e-7) - tr.delta_tra_m(g, c, t - 1e-7)) / 2e-7)
+            slope = (tr.delta_tra_m(g, c, t + 1e-7) - tr.delta_tra_m(g, c, t - 1e-7)) / 2e-7
+            t = t - (tr.delta_tra_m(g, c, t) - delta) / slope
         return t
     tp, tm = theta_at(d0 + eps, th), theta_at(d0 - eps, th)
     leg = lambda t: -tr.foot_height_fab_m(g, t)
