@@ -19,6 +19,7 @@ from hamr_bench.errors import ConfigError, HamrBenchError
 from hamr_bench.interfaces import Amplifier, Camera, ForceSensor, Stage
 
 RIGS_DIR = Path(__file__).resolve().parent.parent / "rigs"
+RIG_TABLES = {"rig", "stage", "force_sensor", "actuator_force_sensor", "amplifier", "camera", "sim"}
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,9 @@ def load_rig(
     path = Path(path)
     doc = load_toml(path)
     source = str(path)
+    unknown = sorted(set(doc) - RIG_TABLES)
+    if unknown:
+        raise ConfigError(f"{source}: unknown table [{unknown[0]}] (known: {', '.join(sorted(RIG_TABLES))})")
     rig_section = section(doc, source, "rig")
     kind = rig_section.str("kind", "real", choices=("real", "sim"))
     name = rig_section.str("name", path.stem)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hamr_bench.config import section
+from hamr_bench.config import Section, section
 from sim_devices.bench import BenchSettings, SimBench, parse_fault
 
 
@@ -17,7 +17,7 @@ def make_bench(
 ) -> SimBench:
     sim = section(doc, source, "sim")
     amp = section(doc, source, "amplifier")
-    camera = section(doc, source, "camera")
+    camera = section(doc, source, "camera", required=False) or Section(source, "camera", {})
     defaults = BenchSettings()
     file_effects = sim.table_of_floats("effects")
     file_design = sim.int("design", defaults.design, lo=1, hi=5)

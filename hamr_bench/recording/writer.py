@@ -393,6 +393,7 @@ class Recorder:
             if not self._thread.is_alive():
                 self._check_open()
                 raise RecordingError(f"recording {self.path}: writer stopped ({self._failure_text()})")
+            self._wake.set()  # the writer may be idling between polls: there is work now
             self._space.wait(0.05)
 
     def _register_scalar(self, topic: str, field_names: tuple[str, ...]) -> _Channel:
