@@ -138,6 +138,7 @@ class SimBench:
         self.sensor_compliance_m_per_N = effects.get("sensor_compliance", 0.0)
         self._free_height_table = self._tabulate_free_height() if s.fixture == "leg" else None
         self._drive_cache: tuple[float, tuple[float, float]] | None = None
+        self._force_cache: dict[tuple[float, float, float], float] = {}
         self._name = f"bench{next(_bench_ids)}"
         self._endpoints: list[str] = []
         self._build_daq()
@@ -289,7 +290,9 @@ class SimBench:
         """True force between foot (or tip) and sensor at each time."""
         times_s = np.atleast_1d(np.asarray(times_s, dtype=float))
         vb, vd = self.drive_many(times_s)
-        surface = self.surface_m(times_s)
+        return self._contact_from_state(vb, vd, self.surface_m(times_s))
+
+    def _contact_from_state(self, vb: np.ndarray, vd: np.ndarray, surface: np.ndarray) -> np.ndarray:
         force = self._pressing_force(vb, vd, surface)
         c = self.sensor_compliance_m_per_N
         if c > 0 and np.any(force > 0):
@@ -298,7 +301,19 @@ class SimBench:
         return force
 
     def contact_force_N(self, time_s: float) -> float:
-        return float(self.contact_forces_N(np.array([time_s]))[0])
+        """Scalar form for the serial sensor emulator, which asks once per sample. During dwells the drive and
+        the stage hold still, so the same state recurs for hundreds of samples: remember the last answers."""
+        t = np.array([time_s])
+        vb, vd = self.drive_many(t)
+        surface = self.surface_m(t)
+        key = (float(vb[0]), float(vd[0]), float(surface[0]))
+        force = self._force_cache.get(key)
+        if force is None:
+            force = float(self._contact_from_state(vb, vd, surface)[0])
+            if len(self._force_cache) > 4096:
+                self._force_cache.clear()
+            self._force_cache[key] = force
+        return force
 
     def _wrench(self, time_s):
         """(Fx, Fy, Fz, Tx, Ty, Tz) on the Nano17: the tip presses along Fz. Takes an array of times."""

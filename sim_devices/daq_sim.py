@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import lfilter
 
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout
@@ -101,6 +100,18 @@ def load_calibration_SI(path: Path | str) -> np.ndarray:
     matrix = np.array([rows[name] for name in _AXES], dtype=float)
     matrix[3:] *= torque_scale
     return matrix
+
+
+def _first_order_response(target: np.ndarray, a: float, y0: float) -> np.ndarray:
+    """z[n] = a z[n-1] + (1 - a) target[n], z[-1] = y0: the exact sampled response of a first-order lag to a
+    staircase. (A plain loop: importing scipy.signal for this costs over a second at every start-up.)"""
+    out = np.empty(len(target))
+    z = y0
+    b = 1.0 - a
+    for n, x in enumerate(target.tolist()):
+        z = a * z + b * x
+        out[n] = z
+    return out
 
 
 @dataclass
@@ -216,8 +227,7 @@ class SimDaq:
             y = np.concatenate([[y0], target[:-1]]) if ch.tau_s == 0.0 else np.array([y0])
         else:
             a = math.exp(-dt_s / ch.tau_s)
-            z = lfilter([1.0 - a], [1.0, -a], target, zi=[a * y0])[0]
-            y = np.concatenate([[y0], z[:-1]])
+            y = np.concatenate([[y0], _first_order_response(target[:-1], a, y0)])
         # a new write replaces everything scheduled from t0 on
         cut = bisect.bisect_left(ch.starts_s, t0_s)
         del ch.segments[cut:], ch.starts_s[cut:]
@@ -284,7 +294,27 @@ class SimDaq:
         k = 0 if not math.isfinite(seg.dt_s) else min(int((time_s - seg.t0_s) / seg.dt_s), len(seg.daq_V) - 1)
         return float(seg.daq_V[k])
 
+    def _output_at(self, ch: _AoChannel, t: float, apply_trip: bool = True) -> float:
+        """`_output` for one time, without array machinery (the bench asks this thousands of times a second)."""
+        if apply_trip and ch.tripped_at_s is not None and t >= ch.tripped_at_s:
+            return 0.0
+        i = bisect.bisect_right(ch.starts_s, t) - 1
+        if i < 0:
+            return 0.0
+        seg = ch.segments[i]
+        if math.isfinite(seg.dt_s):
+            k = min(max(int((t - seg.t0_s) / seg.dt_s), 0), len(seg.target_V) - 1)
+            tk = seg.t0_s + k * seg.dt_s
+        else:
+            k, tk = 0, seg.t0_s
+        target, yk = float(seg.target_V[k]), float(seg.y_V[k])
+        if ch.tau_s > 0:
+            return target + (yk - target) * math.exp(-(t - tk) / ch.tau_s)
+        return target
+
     def _output(self, ch: _AoChannel, t: np.ndarray, apply_trip: bool = True) -> np.ndarray:
+        if t.size == 1:
+            return np.array([self._output_at(ch, float(t.flat[0]), apply_trip)])
         out = np.zeros_like(t, dtype=float)
         if ch.segments:
             if t.size == 1:  # the bench's usual question: no array conversion of the whole history
