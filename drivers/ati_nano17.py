@@ -179,9 +179,30 @@ class AtiNano17:
         data = np.asarray(block.data_V, dtype=float)
         if data.size == 0:
             return []
-        force = self._sign * self._convert(data)[self._axis]
         times = block.start_time_s + np.arange(data.shape[1]) / block.sample_rate_Hz
+        try:
+            force = self._sign * self._convert(data)[self._axis]
+        except DeviceFault as exc:
+            # Samples before the first overloaded one are good readings: they travel with the error
+            # (`samples_before`) so the caller can keep them.
+            good = self._good_prefix(data)
+            force = self._sign * self._convert(data[:, :good])[self._axis] if good else np.empty(0)
+            exc.samples_before = [ForceSample(t, f)  # type: ignore[attr-defined]
+                                  for t, f in zip(times[:good].tolist(), force.tolist())]
+            raise
         return [ForceSample(t, f) for t, f in zip(times.tolist(), force.tolist())]
+
+    def _good_prefix(self, data: np.ndarray) -> int:
+        """How many leading samples of a block convert without an overload."""
+        lo, hi = 0, data.shape[1]  # the first bad sample lies in [lo, hi)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            try:
+                self._convert(data[:, : mid + 1])
+                lo = mid + 1
+            except DeviceFault:
+                hi = mid
+        return lo
 
     def stop_stream(self) -> None:
         if self._streaming:

@@ -82,6 +82,7 @@ class LoadstarSensor:
         self._streaming = False
         self._last_stream_data_s = 0.0
         self._last_sample_s = -math.inf
+        self._byte_time_s = 10.0 / float(baudrate)  # 8N1: a start bit, 8 data bits, a stop bit
         self._line = SerialLine(
             url_or_port,
             clock,
@@ -175,8 +176,8 @@ class LoadstarSensor:
 
     def read_stream(self) -> list[ForceSample]:
         """Samples received since the last call. They arrive without timestamps; the last one of a batch is
-        stamped with its arrival time and earlier ones are spaced back at the stream rate (never before the
-        previous batch). DeviceTimeout when no line has come for the timeout."""
+        stamped with its arrival time and earlier ones are spaced back at the stream period or the time a line
+        takes on the wire at the baud rate, whichever is longer (never before the previous batch). DeviceTimeout when no line has come for the timeout."""
         if not self._streaming:
             return []
         lines = self._line.read_available_lines("stream")
@@ -195,12 +196,24 @@ class LoadstarSensor:
             return []
         self._last_stream_data_s = now_s
         period_s = 1.0 / self.stream_rate_Hz
+        # A sensor sends its next reading a period later, or once the previous line has left if the baud rate
+        # is the limit (9600 baud carries ~100 short lines/s, less than the 150 Hz stream): a batch that piled
+        # up while the caller was busy is spaced back at that pace, not squeezed to the nominal rate.
+        spacing_s = [max(period_s, (len(text) + 2) * self._byte_time_s) for text in lines]
+        stamps = [now_s] * len(lines)
+        for i in range(len(lines) - 2, -1, -1):
+            stamps[i] = stamps[i + 1] - spacing_s[i]
         samples = []
-        n = len(lines)
-        for i, text in enumerate(lines):
-            time_s = max(now_s - (n - 1 - i) * period_s, self._last_sample_s + 1e-9)
-            time_s = min(time_s, now_s)
-            samples.append(ForceSample(time_s=time_s, force_N=self._to_N(text, time_s)))
+        for text, stamp in zip(lines, stamps):
+            time_s = min(max(stamp, self._last_sample_s + 1e-9), now_s)
+            try:
+                force_N = self._to_N(text, time_s)
+            except (DeviceFault, DeviceProtocolError) as exc:
+                # The readings before the bad line are good: they travel with the error (`samples_before`) so
+                # the caller can keep them.
+                exc.samples_before = samples  # type: ignore[attr-defined]
+                raise
+            samples.append(ForceSample(time_s=time_s, force_N=force_N))
             self._last_sample_s = time_s
         return samples
 

@@ -136,7 +136,13 @@ class NewportSMC100:
             raise DeviceProtocolError(f"{self.device}: bad TS reply {value!r}: {exc}", self.device) from exc
 
     def is_moving(self) -> bool:
-        return self.status().is_moving
+        """True while MOVING, HOMING or JOGGING, False when READY. Any other state (DISABLE, NOT REFERENCED after a
+        tripped switch, ...) or an error bit is a DeviceFault: the carriage no longer holds its position, so a
+        caller checking on it between moves must not take it for "still"."""
+        status = self.status()
+        if status.error_bits or not (status.is_ready or status.is_moving):
+            raise DeviceFault(f"{self.device}: stage not holding position: {status.describe()}", self.device)
+        return status.is_moving
 
     def position_m(self) -> float:
         return self._query_number("TP") * _MM

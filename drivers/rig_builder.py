@@ -38,7 +38,7 @@ def build_stage(table: Section, clock: Clock, port: str | None, traffic: Traffic
     table.mark_used("port", "toward_leg_sign")
     table.check_no_unknown_keys()
     return NewportSMC100(port or table.str("port"), clock, **settings,
-                         port_opener=_serial_opener(f"stage-{backend}", clock, traffic))
+                         port_opener=_serial_opener("stage", clock, traffic))
 
 
 def build_force_sensor(table: Section, clock: Clock, ports: dict[str, Any], traffic: TrafficSink | None,
@@ -56,7 +56,7 @@ def build_force_sensor(table: Section, clock: Clock, ports: dict[str, Any], traf
         )
         table.check_no_unknown_keys()
         return LoadstarSensor(ports.get("force_sensor") or table.str("port"), clock, **settings,
-                              port_opener=_serial_opener("force_sensor-loadstar", clock, traffic))
+                              port_opener=_serial_opener("force_sensor", clock, traffic))
     from drivers.ati_nano17 import AtiNano17
 
     cal = Path(table.str("calibration_file"))

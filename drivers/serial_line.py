@@ -152,7 +152,14 @@ class SerialLine:
                 self._buffer += self._port.read(waiting)
         lines = []
         while (raw := self._take_line()) is not None:
-            lines.append(self._decode(raw, what))
+            try:
+                lines.append(self._decode(raw, what))
+            except DeviceProtocolError:
+                if not lines:
+                    raise
+                # Hand over the good lines received before the bad one; the bad one raises on the next call.
+                self._buffer[:0] = raw + self.read_terminator
+                return lines
         if len(self._buffer) > self.max_line_bytes:
             junk = bytes(self._buffer[:40])
             self._buffer.clear()

@@ -53,6 +53,9 @@ class Rig:
     is_simulated: bool = False
     bench: Any = None
     settings: dict[str, Any] = field(default_factory=dict)
+    # Set by the runner when a run ended by a fault or abort: closing the devices then fails for the same cause
+    # (a DAQ that is gone cannot be written), and that must not replace the run's own one-line reason.
+    faulted: bool = False
 
     def devices(self) -> list[Any]:
         return [d for d in (self.camera, self.force_sensor, self.amp_drive, self.amp_bias, self.stage) if d]
@@ -66,7 +69,7 @@ class Rig:
                 errors.append(str(exc))
         if self.bench is not None and hasattr(self.bench, "close"):
             self.bench.close()
-        if errors:
+        if errors and not self.faulted:
             raise ConfigError("while closing the rig: " + "; ".join(errors))
 
 
@@ -100,6 +103,7 @@ def load_rig(
     record_traffic: Callable[..., None] | None = None,
     faults: list[str] | None = None,
     model_overrides: dict[str, dict[str, Any]] | None = None,
+    port_overrides: dict[str, Callable[[Clock], Any]] | None = None,
 ) -> Rig:
     """Build the rig a file describes. `faults` ('device:fault@time_s') are injected on a simulated rig. On a
     simulated rig, `design`, `layers`, `effects` and `seed` override the
@@ -122,11 +126,15 @@ def load_rig(
         bench = make_bench(doc, source, design=design, layers=layers, effects=effects, seed=seed, fixture=fixture,
                            faults=faults, **({"model_overrides": model_overrides} if model_overrides else {}))
         ports, clock = bench.ports(), bench.clock
+        # Replay can serve a serial device from recorded traffic instead of its emulator (built on the rig clock).
+        ports.update({role: make_port(clock) for role, make_port in (port_overrides or {}).items()})
     else:
         if faults:
-            raise ConfigError("--fault is for the simulated bench only (use --sim)")
+            raise ConfigError(f"{source}: [rig] kind is \"real\": --fault is for the simulated bench only "
+                              "(use --sim, or a rig file with kind = \"sim\")")
         if model_overrides:
-            raise ConfigError("model parameter overrides are for the simulated bench only (use --sim)")
+            raise ConfigError(f"{source}: [rig] kind is \"real\": model parameter overrides are for the simulated "
+                              "bench only (use --sim)")
         from hamr_bench.clock import RealClock
 
         clock = RealClock()

@@ -227,9 +227,14 @@ class SimCamera:
         p = self._drop_probability if self._active("dropped_frames") else 0.0
         while p > 0 and self._rng.random() < p:
             k += 1
-        self.frames_lost += k - self._last_index - 1
         start_s = k / fps
         end_s = start_s + exposure
+        if end_s - now > self._read_timeout_s:
+            # A capture read gives up after its timeout (CAP_PROP_READ_TIMEOUT_MSEC) rather than block until a
+            # camera that loses most frames delivers one: the caller must not be stuck longer than it asked.
+            self._clock.sleep(self._read_timeout_s)
+            return False
+        self.frames_lost += k - self._last_index - 1
         if end_s > now:
             self._clock.sleep(end_s - now)
         m = self._spec.motion_samples

@@ -159,6 +159,9 @@ class SimDaq:
     ) -> None:
         self._clock = clock
         self._rng = rng
+        # The Nano17's gauge noise has its own stream, drawn sample by sample in time order: a force stream read in
+        # other blocks, or amplifier monitors read more or less often, must not change the force noise.
+        self._gauge_rng = np.random.default_rng(rng.integers(2**63))
         self._history_s = history_s
         self._max_ao_rate_Hz = max_ao_rate_Hz
         self._max_ai_rate_Hz = max_ai_rate_Hz
@@ -381,7 +384,7 @@ class SimDaq:
             wrench = np.array([np.asarray(self._wrench_source(float(t)), dtype=float) for t in times_s])
             wrench = wrench.reshape(-1, 6)
         volts = self._inverse_cal @ wrench.T + np.asarray(spec.bias_V)[:, None]
-        volts += self._rng.normal(0.0, spec.noise_V, volts.shape)
+        volts += self._gauge_rng.normal(0.0, spec.noise_V, volts.shape[::-1]).T  # one row of 6 per sample
         if times_s.size and self._faults.is_active("overload", float(times_s[-1])):
             # the sensor is pushed far past its range: every gauge pins at the input limit
             overloaded = np.array([self._faults.is_active("overload", float(t)) for t in times_s], dtype=bool)

@@ -9,6 +9,7 @@ every force sample is checked against `force_limit_N`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from dataclasses import dataclass
@@ -34,6 +35,9 @@ from hamr_bench.rig import Rig
 POLL_INTERVAL_S = 0.02
 SLOW_STREAM_INTERVAL_S = 0.02  # stage position and amplifier monitors
 FORCE_WINDOW_S = 0.1  # averaging window of a force reading during the contact search
+# While sampling (drives, dwells) the stage is asked this often whether it still holds its position: a following
+# error or a tripped switch while still is otherwise only seen at the next move. One TS exchange per interval.
+STAGE_CHECK_INTERVAL_S = 0.25
 COMMAND_TOPICS = {"bias": "/amplifier/bias/command", "drive": "/amplifier/drive/command"}
 MONITOR_TOPICS = {"bias": "/amplifier/bias/monitor", "drive": "/amplifier/drive/monitor"}
 
@@ -76,6 +80,8 @@ class Runner:
         self._next_slow_s = 0.0
         self._streaming = False
         self._commanded = {"bias": 0.0, "drive": 0.0}
+        self._stage_homed = False
+        self._next_stage_check_s = 0.0
 
     # ----------------------------------------------------------------- the run and its end
     def run(self, protocol: ModuleType, params: Any) -> RunResult:
@@ -101,6 +107,9 @@ class Runner:
         return RunResult(status, reason, self.steps_done)
 
     def _finish(self, status: str, reason: str) -> None:
+        if status != "success":
+            # Closing a faulted rig fails the same way the run did; the reason recorded here is the message.
+            self.rig.faulted = True
         problems = self.make_safe()
         if problems:
             reason = f"{reason}; while making safe: {'; '.join(problems)}"
@@ -132,6 +141,14 @@ class Runner:
         except Exception as exc:  # noqa: BLE001
             problems.append(f"stage: {exc}")
         if self._streaming:
+            # Samples the sensor took before the end (e.g. while a stage move that then failed was blocking) are
+            # still in the port buffer: record them before the stream stops. Best effort - if the sensor is what
+            # failed, the reason already says so.
+            try:
+                for sample in self.rig.force_sensor.read_stream():
+                    self.rec.write_scalar("/force", sample.time_s, force_N=sample.force_N)
+            except Exception:  # noqa: BLE001, S110 - salvage only; the stream is stopped next either way
+                pass
             try:
                 self.rig.force_sensor.stop_stream()
             except Exception as exc:  # noqa: BLE001
@@ -163,10 +180,18 @@ class Runner:
             except StopIteration:
                 break
             reply = handlers[type(message)](message)
+        self._check_stage()  # a stage that faulted while still (no move since) must not end in "success"
         if self.step_index >= 0:
             self.steps_done = self.step_index + 1
 
+    def _check_stage(self) -> None:
+        """Ask the stage whether it still holds its position (drivers raise DeviceFault when it does not); only
+        once this run has homed it (before that, NOT REFERENCED is its normal state)."""
+        if self._stage_homed:
+            self.rig.stage.is_moving()
+
     def _step(self, msg: Step) -> None:
+        self._check_stage()
         if self.step_index >= 0:
             self.steps_done = self.step_index + 1
         self.step_index = msg.index
@@ -176,6 +201,7 @@ class Runner:
     def _home(self, _msg: Home) -> None:
         self._event("home")
         self.rig.stage.home()
+        self._stage_homed = True
         self._record_stage()
 
     def _tare(self, _msg: Tare) -> None:
@@ -292,21 +318,31 @@ class Runner:
         """Record every stream until the rig clock reaches `end_s` (at least one pass)."""
         written = 0
         y0_px = None
-        while True:
-            now = self.clock.now_s()
+        try:
+            while True:
+                now = self.clock.now_s()
+                if waveform is not None:
+                    written = self._record_waveform(waveform, now, written)
+                self._drain_force()
+                if now >= self._next_slow_s:
+                    self._record_stage()
+                    self._record_monitors(now)
+                    self._next_slow_s = now + SLOW_STREAM_INTERVAL_S
+                if now >= self._next_stage_check_s:
+                    self._check_stage()
+                    self._next_stage_check_s = now + STAGE_CHECK_INTERVAL_S
+                if track and self.rig.camera is not None:
+                    y0_px = self._grab_and_track(y0_px)
+                if now >= end_s:
+                    break
+                if not (track and self.rig.camera is not None):
+                    self.clock.sleep(min(POLL_INTERVAL_S, end_s - now))
+        except BaseException:
+            # The DAQ played the waveform up to now whatever failed: record those command samples too.
             if waveform is not None:
-                written = self._record_waveform(waveform, now, written)
-            self._drain_force()
-            if now >= self._next_slow_s:
-                self._record_stage()
-                self._record_monitors(now)
-                self._next_slow_s = now + SLOW_STREAM_INTERVAL_S
-            if track and self.rig.camera is not None:
-                y0_px = self._grab_and_track(y0_px)
-            if now >= end_s:
-                break
-            if not (track and self.rig.camera is not None):
-                self.clock.sleep(min(POLL_INTERVAL_S, end_s - now))
+                with contextlib.suppress(HamrBenchError):
+                    self._record_waveform(waveform, self.clock.now_s(), written)
+            raise
         if waveform is not None:
             self._record_waveform(waveform, end_s, written)
 
@@ -320,7 +356,14 @@ class Runner:
     def _drain_force(self) -> list[float]:
         values = []
         limit = self.rig.limits.force_limit_N
-        for sample in self.rig.force_sensor.read_stream():
+        try:
+            samples = self.rig.force_sensor.read_stream()
+        except DeviceError as exc:
+            # Good readings taken before the fault in the same batch (drivers attach them) are kept.
+            for sample in getattr(exc, "samples_before", ()):
+                self.rec.write_scalar("/force", sample.time_s, force_N=sample.force_N)
+            raise
+        for sample in samples:
             self.rec.write_scalar("/force", sample.time_s, force_N=sample.force_N)
             values.append(sample.force_N)
             if abs(sample.force_N) > limit:
@@ -335,6 +378,13 @@ class Runner:
         while self.clock.now_s() < end_s or not values:
             self.clock.sleep(POLL_INTERVAL_S)
             values += self._drain_force()
+            now = self.clock.now_s()
+            if now >= self._next_stage_check_s:
+                # A long contact search never samples the other streams: check on the stage and the amplifiers
+                # (a trip shows on their monitors) as often as a drive would.
+                self._check_stage()
+                self._record_monitors(now)
+                self._next_stage_check_s = now + STAGE_CHECK_INTERVAL_S
             if self.clock.now_s() > end_s + 1.0 and not values:
                 raise DeviceError("force sensor stream delivered no samples for 1 s", device="force_sensor")
         return float(np.mean(values))
