@@ -1,0 +1,480 @@
+"""Fitting the model to a Dataset: the actuator's five effective parameters per layer count (paper Table I) and
+each design's serial compliance, flexure stiffnesses and actual bias (paper Table III), with 95 % intervals and an
+identifiability verdict per parameter (analysis/uncertainty.py).
+
+Weights: residuals are grouped by (run, quantity); each group's sigma is the pooled scatter between repetitions of
+the same condition (or, without repetitions, the within-step spread over cycles), then re-estimated from the
+residuals (`fit_weighted`); only the RELATIVE weights matter, the overall noise scale is estimated from the fit
+(see uncertainty.py). Every run with a contact search has its own zero offset, a nuisance parameter with a prior
+(analysis/observations.py); the intervals profile it out.
+
+References (start point, and where a parameter the data cannot constrain is left):
+- actuator: Table I "reported" values (the as-built, caliper and data-sheet numbers) for E_p, d31, t_p, length,
+  width; the non-fitted fields (carbon-fibre thickness, FR-4, taper, extension, E_c) from the recording's
+  parameter set (`design.params_set`, `design.model_params`);
+- transmission: k_ser = 1000 N/m, kappa_i = 0 (a zero-stiffness flexure), bias = the DESIGNED bias of the design
+  (0 or 200 um, Table II). The geometry is the model's (docs/model.md) and is not fitted.
+The transmission fit uses the actuator the leg recordings name (their params_set / model_params) unless
+`actuator_source="fit"` and the dataset has actuator recordings of that layer count.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Iterable
+
+import numpy as np
+
+from analysis.dataset import Dataset, Observation
+from analysis.observations import LegObservations, actuator_prediction
+from analysis.uncertainty import FitOutcome, ParamSpec, Problem, fit_problem
+from hamr_bench.errors import ConfigError, HamrBenchError
+from hamr_bench.model import ActuatorParams, DesignParams, Powertrain, actuator_preset, design_preset
+
+METHODS = ("least-squares", "nelder-mead")
+LEG_FIT_PROTOCOLS = ("blocked-force", "sag-sweep", "free-displacement")
+
+ACTUATOR_SPECS = (
+    ParamSpec("E_p", "Pa", 5e9, 150e9),
+    ParamSpec("d31", "m/V", 0.05e-9, 3e-9),
+    ParamSpec("t_p", "m", 40e-6, 400e-6),
+    ParamSpec("length", "m", 3e-3, 25e-3),
+    ParamSpec("width", "m", 0.5e-3, 12e-3),
+)
+ACTUATOR_FIELDS = {"E_p": "pzt_modulus_Pa", "d31": "d31_m_per_V", "t_p": "pzt_thickness_m",
+                   "length": "length_m", "width": "width_nom_m"}
+
+TRANSMISSION_SPECS = (
+    ParamSpec("k_ser", "N/m", 30.0, 1e5),
+    ParamSpec("kappa_1", "N m/rad", 0.0, 5e-4, log=False, typical=1e-5),
+    ParamSpec("kappa_2", "N m/rad", 0.0, 5e-4, log=False, typical=1e-5),
+    ParamSpec("kappa_3", "N m/rad", 0.0, 5e-4, log=False, typical=1e-5),
+    ParamSpec("bias", "m", -150e-6, 350e-6, log=False, typical=1e-4),
+)
+TRANSMISSION_REFERENCE_K_SER = 1000.0
+CORRELATION_WARNING = 0.98
+
+
+@dataclass(frozen=True)
+class ParamEstimate:
+    name: str
+    value: float
+    ci95: tuple[float, float] | None
+    unit: str
+    status: str                 # identified | weakly identified | upper limit | not identifiable | not computed
+    reference: float
+
+    def as_json(self) -> dict[str, Any]:
+        return {"value": _num(self.value), "ci95": None if self.ci95 is None else [_num(v) for v in self.ci95],
+                "unit": self.unit, "status": self.status, "identifiable": self.status in ("identified", "upper limit"),
+                "reference": _num(self.reference)}
+
+
+@dataclass
+class GroupFit:
+    """One fitted group: an actuator (by layer count) or a design."""
+
+    key: str
+    params: dict[str, ParamEstimate]
+    rms_N: float | None
+    rms_m: float | None
+    n_observations: int
+    chi2: float
+    dof: int
+    method: str
+    warnings: list[str] = field(default_factory=list)
+    derived: dict[str, dict[str, Any]] = field(default_factory=dict)
+    model: Any = None             # ActuatorParams or (ActuatorParams, DesignParams)
+
+    def as_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {name: p.as_json() for name, p in self.params.items()}
+        out.update(rms_N=_num(self.rms_N), rms_m=_num(self.rms_m), n_observations=self.n_observations,
+                   reduced_chi2=_num(self.chi2 / self.dof) if self.dof > 0 else None, warnings=self.warnings)
+        if self.derived:
+            out["derived"] = self.derived
+        return out
+
+
+@dataclass
+class FitReport:
+    method: str
+    actuators: dict[int, GroupFit]
+    designs: dict[int, GroupFit]
+    warnings: list[str] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, Any]:
+        return {"method": self.method,
+                "actuators": {str(k): v.as_json() for k, v in sorted(self.actuators.items())},
+                "designs": {str(k): v.as_json() for k, v in sorted(self.designs.items())},
+                "warnings": self.warnings}
+
+    def to_json(self) -> str:
+        return json.dumps(self.as_json(), indent=2)
+
+
+def _num(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+# ----------------------------------------------------------------------------------------------- weights
+def group_sigmas(obs: list[Observation]) -> np.ndarray:
+    """Per observation, the sigma of its (run, quantity) group (see module docstring)."""
+    keys = [(o.run, o.quantity) for o in obs]
+    sig = np.empty(len(obs))
+    for key in set(keys):
+        idx = [i for i, k in enumerate(keys) if k == key]
+        members = [obs[i] for i in idx]
+        conds: dict[tuple, list[float]] = {}
+        for o in members:
+            conds.setdefault((o.mode, round(o.voltage_V, 6), round(o.sag_m, 9), o.protocol), []).append(o.value)
+        ss, df = 0.0, 0
+        for vals in conds.values():
+            if len(vals) > 1:
+                v = np.asarray(vals)
+                ss += float(np.sum((v - v.mean()) ** 2))
+                df += v.size - 1
+        values = np.asarray([o.value for o in members])
+        scale = float(np.sqrt(np.mean(values**2))) or 1.0
+        if df > 0:
+            s = math.sqrt(ss / df)
+        else:
+            spreads = [o.spread / math.sqrt(o.n_cycles) for o in members if np.isfinite(o.spread) and o.n_cycles > 1]
+            s = float(np.median(spreads)) if spreads else 0.01 * scale
+        sig[idx] = max(s, 1e-4 * scale, 1e-12)
+    return sig
+
+
+@dataclass(frozen=True)
+class Nuisance:
+    """Per-run zero offsets (analysis/observations.py): one parameter per run with a contact search, with a
+    Gaussian prior of width `sigma` around 0 (the search's resolution), entered as one extra residual each."""
+
+    runs: tuple[int, ...]
+    row_index: np.ndarray            # per observation row: index into runs, or -1 (no offset)
+    specs: tuple[ParamSpec, ...]
+    sigma: float
+
+    def per_row(self, values: np.ndarray) -> np.ndarray:
+        v = np.r_[np.asarray(values, float), 0.0]
+        return v[self.row_index]
+
+    def prior_residuals(self, values: np.ndarray) -> np.ndarray:
+        return np.asarray(values, float) / self.sigma
+
+
+def make_nuisance(obs: list[Observation], applies, name: str, unit: str, sigma: float, bound: float) -> Nuisance:
+    runs = tuple(sorted({o.run for o in obs if applies(o)}))
+    pos = {r: i for i, r in enumerate(runs)}
+    rows = np.array([pos[o.run] if applies(o) else -1 for o in obs], dtype=int)
+    specs = tuple(ParamSpec(f"{name}[run {r}]", unit, -bound, bound, log=False, typical=sigma) for r in runs)
+    return Nuisance(runs, rows, specs, sigma)
+
+
+def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, reference: np.ndarray, nuisance: Nuisance,
+                 method: str, intervals: bool, level: float = 0.95) -> tuple[FitOutcome, np.ndarray]:
+    """Weighted fit of physical `specs` plus the `nuisance` offsets; `predict(physical, offsets_per_row)`.
+
+    Two passes. (1) weights from the replicate scatter (`group_sigmas`), fit. (2) each group's sigma re-estimated
+    from its residuals pooled with its replicate scatter (dof-weighted: a group of 8 points with 4 replicate dof is
+    otherwise badly weighted), fit again from the first solution, with profile intervals for the physical
+    parameters. Returns (outcome over physical + nuisance parameters, sigmas)."""
+    sig = group_sigmas(obs)
+    n_phys = len(specs)
+    all_specs = tuple(specs) + nuisance.specs
+    all_ref = np.r_[reference, np.zeros(len(nuisance.specs))]
+
+    def full_predict(p: np.ndarray) -> np.ndarray | None:
+        return predict(p[:n_phys], nuisance.per_row(p[n_phys:]))
+
+    def make(sigma: np.ndarray) -> Problem:
+        def residuals(p: np.ndarray) -> np.ndarray:
+            pred = full_predict(p)
+            if pred is None:
+                return np.full(y.size + len(nuisance.specs), np.nan)
+            return np.r_[(pred - y) / sigma, nuisance.prior_residuals(p[n_phys:])]
+
+        return Problem(all_specs, all_ref, residuals)
+
+    out1 = fit_problem(make(sig), method, intervals=False, tol=1e-4)   # only sets the weights: pass 2 refines
+    pred = full_predict(out1.values)
+    if pred is not None and np.all(np.isfinite(pred)):
+        res = pred - y
+        n, p = y.size, len(all_specs)
+        keys = [(o.run, o.quantity) for o in obs]
+        for key in set(keys):
+            idx = np.array([i for i, k in enumerate(keys) if k == key])
+            df_rep = _replicate_dof([obs[i] for i in idx])
+            df_res = idx.size * max(1.0 - p / n, 0.1)
+            var = (float(np.sum(res[idx] ** 2)) + df_rep * float(sig[idx][0]) ** 2) / (df_res + df_rep)
+            sig[idx] = max(math.sqrt(var), 1e-3 * float(sig[idx][0]))
+    z1 = np.array([sp.to_z(v, r) for sp, v, r in zip(all_specs, out1.values, all_ref)])
+    # each group's sigma was estimated from these residuals: one degree of freedom each
+    n_groups = len({(o.run, o.quantity) for o in obs})
+    out = fit_problem(make(sig), method, intervals, z0=z1, profile=range(n_phys), level=level,
+                      extra_dof_used=n_groups)
+    return out, sig
+
+
+def _replicate_dof(members: list[Observation]) -> int:
+    conds: dict[tuple, int] = {}
+    for o in members:
+        key = (o.mode, round(o.voltage_V, 6), round(o.sag_m, 9), o.protocol)
+        conds[key] = conds.get(key, 0) + 1
+    return sum(c - 1 for c in conds.values())
+
+
+# ----------------------------------------------------------------------------------------------- actuator
+def _actuator_base(dataset: Dataset, obs: list[Observation], layers: int) -> ActuatorParams:
+    info = dataset.runs[obs[0].run].info
+    params_set = info.params_set if info.params_set in ("reported", "effective") else "effective"
+    base = actuator_preset(layers, params_set)
+    known = {f.name for f in fields(ActuatorParams)}
+    mp = info.model_params or {}
+    # the runner writes {"actuator": {field: value}, "design": {...}}; a flat {field: value} is accepted too.
+    # Only the actuator is taken: the design's values are what a fit must find, never an input to it.
+    mp = mp.get("actuator", mp) if isinstance(mp.get("actuator"), dict) else mp
+    overrides = {k: v for k, v in mp.items()
+                 if k in known and k not in ("layers", "label") and isinstance(v, (int, float))}
+    return replace(base, **overrides) if overrides else base
+
+
+def actuator_with(base: ActuatorParams, values: dict[str, float]) -> ActuatorParams:
+    return replace(base, **{ACTUATOR_FIELDS[k]: float(v) for k, v in values.items()})
+
+
+ACTUATOR_OFFSET_SIGMA_N = 5e-3     # the actuator protocol's contact threshold: the search resolves zero to this
+
+
+def fit_actuator(dataset: Dataset, layers: int, method: str = "least-squares", intervals: bool = True,
+                 level: float = 0.95) -> GroupFit:
+    obs = [o for o in dataset.observations if o.fixture == "actuator" and o.layers == layers]
+    if not obs:
+        raise ConfigError(f"no actuator observations with {layers} layers in the given recordings")
+    base = _actuator_base(dataset, obs, layers)
+    reported = actuator_preset(layers, "reported")
+    reference = np.array([getattr(reported, ACTUATOR_FIELDS[s.name]) for s in ACTUATOR_SPECS])
+    mode = np.array([o.mode for o in obs])
+    volts = np.array([o.voltage_V for o in obs])
+    y = np.array([o.value for o in obs])
+    nuisance = make_nuisance(obs, lambda o: o.mode == "blocked", "f0", "N", ACTUATOR_OFFSET_SIGMA_N, 0.05)
+
+    def model(p: np.ndarray) -> ActuatorParams:
+        return actuator_with(base, dict(zip(ACTUATOR_FIELDS, p)))
+
+    def predict(p: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
+        try:
+            return actuator_prediction(model(p), mode, volts, offsets)
+        except HamrBenchError:
+            return None
+
+    out, sig = fit_weighted(obs, y, predict, ACTUATOR_SPECS, reference, nuisance, method, intervals, level)
+    n = len(ACTUATOR_SPECS)
+    fitted = model(out.values[:n])
+    pred = predict(out.values[:n], nuisance.per_row(out.values[n:]))
+    g = _group(f"{layers}", ACTUATOR_SPECS, reference, out, obs, y, pred, method)
+    g.model = fitted
+    g.derived = _actuator_derived(obs, sig, fitted, level)
+    g.derived["zero_offsets"] = _offsets_json(dataset, nuisance, out.values[n:], "N")
+    return g
+
+
+def _offsets_json(dataset: Dataset, nuisance: Nuisance, values: np.ndarray, unit: str) -> dict[str, Any]:
+    return {"unit": unit, "note": "per-run zero offset at nominal zero sag / tip zero (nuisance parameter)",
+            "runs": {dataset.runs[r].info.path: float(v) for r, v in zip(nuisance.runs, values)}}
+
+
+def _slope_ci(x: np.ndarray, y: np.ndarray, sig: np.ndarray, groups: np.ndarray | None) -> tuple[float, float, int]:
+    """Weighted least-squares slope (through the origin, or with one intercept per group), its standard error with
+    the noise scale estimated from the residuals, and the degrees of freedom."""
+    cols = [x]
+    if groups is not None:
+        cols += [(groups == g).astype(float) for g in np.unique(groups)]
+    X = np.column_stack(cols) / sig[:, None]
+    yw = y / sig
+    beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
+    dof = x.size - X.shape[1]
+    if dof <= 0:
+        return float(beta[0]), math.nan, dof
+    s2 = float(np.sum((yw - X @ beta) ** 2)) / dof
+    cov = np.linalg.inv(X.T @ X) * s2
+    return float(beta[0]), math.sqrt(cov[0, 0]), dof
+
+
+def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams,
+                      level: float = 0.95) -> dict[str, dict[str, Any]]:
+    """What the actuator data DO identify: blocked force per volt c and free deflection per volt s (hence stiffness
+    c/s and energy c s V^2), each from its own rows. Both observations are linear in them (F = c V + f0_run,
+    stroke = 2 s V), so the 95 % intervals are exact weighted-regression intervals (Student t)."""
+    from scipy import stats
+
+    from hamr_bench.model import actuator as act
+
+    v = np.array([o.voltage_V for o in obs])
+    y = np.array([o.value for o in obs])
+    runs = np.array([o.run for o in obs])
+    blocked = np.array([o.mode == "blocked" for o in obs])
+    out: dict[str, dict[str, Any]] = {}
+    est = {}
+    for name, m, xx, grp in (("force_per_volt", blocked, v, runs), ("displacement_per_volt", ~blocked, 2 * v, None)):
+        if m.sum() >= 3:
+            est[name] = _slope_ci(xx[m], y[m], sig[m], None if grp is None else grp[m])
+    v_max = float(v.max())
+
+    def entry(value: float, rel_sd: float, dof: int, unit: str) -> dict[str, Any]:
+        t = stats.t.ppf(0.5 + 0.5 * level, max(dof, 1))
+        return {"value": value, "ci95": [value * (1 - t * rel_sd), value * (1 + t * rel_sd)], "unit": unit}
+
+    if "force_per_volt" in est:
+        c, sc, dc = est["force_per_volt"]
+        out["force_per_volt"] = entry(c, sc / c, dc, "N/V")
+        out[f"blocked_force_at_{v_max:g}V"] = entry(c * v_max, sc / c, dc, "N")
+    if "displacement_per_volt" in est:
+        s, ss, ds = est["displacement_per_volt"]
+        out["displacement_per_volt"] = entry(s, ss / s, ds, "m/V")
+        out[f"free_displacement_at_{v_max:g}V"] = entry(s * v_max, ss / s, ds, "m")
+    if len(est) == 2:
+        rel = math.hypot(sc / c, ss / s)
+        dof = min(dc, ds)
+        out["stiffness"] = entry(c / s, rel, dof, "N/m")
+        m = act.mass_kg(a)
+        out[f"energy_at_{v_max:g}V"] = entry(c * s * v_max**2, rel, dof, "J")
+        out[f"energy_density_at_{v_max:g}V"] = {**entry(c * s * v_max**2 / m, rel, dof, "J/kg"),
+                                                "note": f"mass {m * 1e6:.2f} mg from the fitted geometry "
+                                                        "(not measured)"}
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- transmission
+def leg_actuator(dataset: Dataset, obs: list[Observation], layers: int,
+                 fitted: dict[int, GroupFit] | None) -> ActuatorParams:
+    if fitted and layers in fitted and fitted[layers].model is not None:
+        return fitted[layers].model
+    return _actuator_base(dataset, obs, layers)
+
+
+def design_with(base: DesignParams, values: dict[str, float]) -> DesignParams:
+    return replace(base, k_ser_N_per_m=float(values["k_ser"]),
+                   kappa_N_m_per_rad=(float(values["kappa_1"]), float(values["kappa_2"]), float(values["kappa_3"])),
+                   bias_m=float(values["bias"]))
+
+
+def zero_sag_sigma_m(dataset: Dataset, obs: list[Observation], a: ActuatorParams, base: DesignParams,
+                     reference: np.ndarray) -> float:
+    """Prior width of a leg run's zero-sag offset: the contact search's force threshold over the leg's stiffness
+    at zero sag, for the REFERENCE transmission (not the fitted one, so the prior does not move with the fit)."""
+    threshold = 0.4e-3
+    for o in obs:
+        c = dataset.runs[o.run].info.protocol_params.get("contact") if isinstance(
+            dataset.runs[o.run].info.protocol_params, dict) else None
+        if isinstance(c, dict) and "threshold_N" in c:
+            threshold = float(c["threshold_N"])
+            break
+    try:
+        k = float(Powertrain(a, design_with(base, dict(zip([s.name for s in TRANSMISSION_SPECS], reference))))
+                  .leg_stiffness_N_per_m(0.0))
+    except HamrBenchError:
+        k = math.nan
+    k = k if np.isfinite(k) and k > 0.5 else 0.5
+    return max(threshold / k, 5e-6)
+
+
+def fit_transmission(dataset: Dataset, design: int, method: str = "least-squares", intervals: bool = True,
+                     protocols: Iterable[str] = LEG_FIT_PROTOCOLS,
+                     fitted_actuators: dict[int, GroupFit] | None = None, level: float = 0.95) -> GroupFit:
+    protocols = tuple(protocols)
+    obs = [o for o in dataset.observations if o.fixture == "leg" and o.design == design and o.protocol in protocols]
+    if not obs:
+        raise ConfigError(f"no leg observations of design {design} ({', '.join(protocols)}) in the given recordings")
+    layer_counts = sorted({o.layers for o in obs})
+    if len(layer_counts) > 1:
+        raise ConfigError(f"design {design}: recordings mix actuators with {layer_counts} layers; fit them apart")
+    a = leg_actuator(dataset, obs, layer_counts[0], fitted_actuators)
+    base = design_preset(design)
+    reference = np.array([TRANSMISSION_REFERENCE_K_SER, 0.0, 0.0, 0.0, base.bias_designed_m])
+    legs = LegObservations([o.protocol for o in obs], [o.voltage_V for o in obs], [o.sag_m for o in obs])
+    y = np.array([o.value for o in obs])
+    names = [s.name for s in TRANSMISSION_SPECS]
+    sigma_h = zero_sag_sigma_m(dataset, obs, a, base, reference)
+    nuisance = make_nuisance(obs, lambda o: o.quantity == "force_N", "h0", "m", sigma_h, 0.5e-3)
+
+    def predict(p: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
+        try:
+            return legs.predict(Powertrain(a, design_with(base, dict(zip(names, p)))), offsets)
+        except HamrBenchError:
+            return None
+
+    out, _sig = fit_weighted(obs, y, predict, TRANSMISSION_SPECS, reference, nuisance, method, intervals, level)
+    n = len(TRANSMISSION_SPECS)
+    d = design_with(base, dict(zip(names, out.values[:n])))
+    pred = predict(out.values[:n], nuisance.per_row(out.values[n:]))
+    g = _group(str(design), TRANSMISSION_SPECS, reference, out, obs, y, pred, method)
+    g.model = (a, d)
+    g.derived = {"actuator": {"layers": a.layers, "label": a.label,
+                              "source": "fit" if fitted_actuators and a.layers in fitted_actuators else "recording"},
+                 "protocols": sorted({o.protocol for o in obs}),
+                 "zero_offsets": {**_offsets_json(dataset, nuisance, out.values[n:], "m"),
+                                  "prior_sigma": sigma_h}}
+    return g
+
+
+# ----------------------------------------------------------------------------------------------- common
+def _group(key: str, specs, reference, out: FitOutcome, obs, y, pred, method) -> GroupFit:
+    params = {}
+    warnings = []
+    for j, spec in enumerate(specs):
+        iv = out.intervals[j] if out.intervals else None
+        status = iv.status if iv else "not computed"
+        params[spec.name] = ParamEstimate(spec.name, float(out.values[j]), (iv.lo, iv.hi) if iv else None,
+                                          spec.unit, status, float(reference[j]))
+        if iv and status == "not identifiable":
+            warnings.append(f"{spec.name}: not identifiable from these data (the profile stays within the 95 % "
+                            f"threshold across the whole search range); value left near the reference "
+                            f"{reference[j]:.4g} {spec.unit}")
+        elif iv and status == "weakly identified":
+            warnings.append(f"{spec.name}: weakly identified (95 % interval {iv.lo:.4g}..{iv.hi:.4g} {spec.unit})")
+    corr = out.correlation
+    # Correlations only between parameters the data constrain on both sides (one pinned at a bound, e.g. a kappa
+    # at zero, has no meaningful local correlation).
+    constrained = [not out.intervals or out.intervals[j].status in ("identified", "weakly identified")
+                   for j in range(len(specs))]
+    for i in range(len(specs)):
+        for j in range(i + 1, len(specs)):
+            r = corr[i, j]
+            if constrained[i] and constrained[j] and np.isfinite(r) and abs(r) > CORRELATION_WARNING:
+                warnings.append(f"{specs[i].name} and {specs[j].name} strongly correlated (r = {r:+.3f}): the data "
+                                f"constrain a combination of them")
+    q = np.array([o.quantity for o in obs])
+    res = pred - y
+    rms_N = float(np.sqrt(np.nanmean(res[q == "force_N"] ** 2))) if np.any(q == "force_N") else None
+    rms_m = float(np.sqrt(np.nanmean(res[q == "displacement_m"] ** 2))) if np.any(q == "displacement_m") else None
+    return GroupFit(key, params, rms_N, rms_m, len(obs), out.chi2, out.dof, method, warnings)
+
+
+def fit_dataset(dataset: Dataset, method: str = "least-squares", intervals: bool = True,
+                actuator_source: str = "recording", designs: Iterable[int] | None = None,
+                level: float = 0.95) -> FitReport:
+    """Fit every actuator layer count and every design present in the dataset (intervals at confidence `level`;
+    the JSON keeps the name ci95, so callers that change it must say so)."""
+    if not 0.5 < level < 1.0:
+        raise ConfigError(f"confidence level {level!r}: expected a number between 0.5 and 1")
+    if method not in METHODS:
+        raise ConfigError(f"--method {method!r}: expected one of {', '.join(METHODS)}")
+    report = FitReport(method, {}, {})
+    for layers in sorted({o.layers for o in dataset.observations if o.fixture == "actuator"}):
+        report.actuators[layers] = fit_actuator(dataset, layers, method, intervals, level)
+    wanted = sorted({o.design for o in dataset.observations
+                     if o.fixture == "leg" and o.design is not None and o.protocol in LEG_FIT_PROTOCOLS})
+    if designs is not None:
+        wanted = [d for d in wanted if d in set(designs)]
+    for d in wanted:
+        report.designs[d] = fit_transmission(dataset, d, method, intervals,
+                                             fitted_actuators=report.actuators if actuator_source == "fit" else None,
+                                             level=level)
+    if not report.actuators and not report.designs:
+        report.warnings.append("no fittable observations (actuator or blocked-force/sag-sweep/free-displacement)")
+    return report
