@@ -25,6 +25,20 @@ class DriveParams:
     sample_rate_Hz: float = 1000.0
     settle_s: float = 0.2
 
+    def validate(self) -> None:
+        # The same checks the waveform generator makes, up front: a bad drive must not surface only after the
+        # contact search.
+        if not self.ramp_s > 0:
+            raise ConfigError(f"drive ramp_s: must be positive (a step excites the actuator resonance), "
+                              f"got {self.ramp_s!r}")
+        for name in ("dwell_high_s", "dwell_low_s", "settle_s"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"drive {name}: expected a non-negative time, got {getattr(self, name)!r}")
+        if self.cycles < 1:
+            raise ConfigError(f"drive cycles: expected at least 1, got {self.cycles!r}")
+        if not self.sample_rate_Hz > 0:
+            raise ConfigError(f"drive sample_rate_Hz: expected a positive rate, got {self.sample_rate_Hz!r}")
+
 
 def field_names(cls: type) -> list[str]:
     return [f.name for f in dataclasses.fields(cls)]
@@ -107,10 +121,23 @@ def load_params(defaults: Any, protocol_file: Path | None, set_options: list[str
         params = override(params, doc, str(protocol_file))
     if set_options:
         params = override(params, parse_set_options(set_options), "--set")
+    sources = " and ".join(filter(None, [str(protocol_file) if protocol_file else "", "--set" if set_options else ""]))
+    try:
+        _validate(params)
+    except ConfigError as exc:
+        raise ConfigError(f"{sources}: {exc}" if sources else str(exc)) from None
+    return params
+
+
+def _validate(params: Any) -> None:
+    """Run `validate()` of the parameters and of every nested parameter table (drive, contact)."""
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        if dataclasses.is_dataclass(value):
+            _validate(value)
     validate = getattr(params, "validate", None)
     if validate:
         validate()
-    return params
 
 
 def as_dict(params: Any) -> dict[str, Any]:

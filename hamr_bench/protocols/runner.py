@@ -45,14 +45,14 @@ MONITOR_TOPICS = {"bias": "/amplifier/bias/monitor", "drive": "/amplifier/drive/
 class Progress(Protocol):
     def step(self, index: int, label: str) -> None: ...
 
-    def close(self) -> None: ...
+    def close(self, completed: bool = True) -> None: ...
 
 
 class NoProgress:
     def step(self, index: int, label: str) -> None:
         pass
 
-    def close(self) -> None:
+    def close(self, completed: bool = True) -> None:
         pass
 
 
@@ -120,7 +120,7 @@ class Runner:
         except HamrBenchError:
             pass
         self.rec.close(status, reason)
-        self.progress.close()
+        self.progress.close(completed=status == "success")
 
     def make_safe(self) -> list[str]:
         """0 V on both channels (drive first), stage stopped, stream stopped. Each device is tried even if another

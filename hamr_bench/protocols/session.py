@@ -54,8 +54,9 @@ class TqdmProgress:
             self.last = index
         self.bar.set_postfix_str(label)
 
-    def close(self) -> None:
-        self.bar.update(self.bar.total - self.bar.n)
+    def close(self, completed: bool = True) -> None:
+        if completed:  # a failed run keeps the bar where it stopped
+            self.bar.update(self.bar.total - self.bar.n)
         self.bar.close()
 
 
