@@ -134,6 +134,10 @@ def stage_motions(bench) -> list:
 
 def check_run(run, rig_max_V: float, slew: float, limits_m: tuple[float, float], force_limit_N: float) -> None:
     bench = run.bench
+    if bench is None:
+        # Refused before any device was built (parameter checks): nothing moved, one line says why.
+        assert run.code == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+        return
     for channel in AO_CHANNELS.values():
         times, daq_V = daq_staircase(bench.daq, channel)
         check_staircase(times, daq_V, rig_max_V, slew, GAIN)
