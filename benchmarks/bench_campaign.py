@@ -7,28 +7,42 @@ covers, and the virtual-clock speed-up (simulated seconds per wall second).
 from __future__ import annotations
 
 import json
+import os
+import resource
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 
-def run(jobs: int | None = None, set_options: list[str] | None = None) -> dict:
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (the campaign's pool workers)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def run(jobs: int | None = None, set_options: list[str] | None = None, out_dir: Path | None = None,
+        **subset: tuple) -> dict:
+    """The campaign (all of it, or `designs=`, `layers=`, `protocols=` of `campaign_runs`) into `out_dir` (kept) or
+    a temporary directory. CPU time counts the pool's worker processes once they have exited."""
     from hamr_bench.protocols.campaign import campaign_runs, run_campaign
     from hamr_bench.recording import RecordingReader
 
     with tempfile.TemporaryDirectory() as tmp:
-        runs = campaign_runs(Path(tmp), {}, 0, True, set_options or [])
+        runs = campaign_runs(Path(out_dir or tmp), {}, 0, True, set_options or [], **subset)
+        cpu0 = _cpu_s()
         start = time.perf_counter()
         results = run_campaign(runs, jobs=jobs, progress=False)
         wall_s = time.perf_counter() - start
+        cpu_s = _cpu_s() - cpu0
         simulated_s = 0.0
         for run_ in runs:
             events = RecordingReader(run_.request.out).events()
             simulated_s += events[-1].time_s - events[0].time_s
     failed = [r for r in results if r[1] != "success"]
-    return {"runs": len(runs), "failed": len(failed), "wall_s": wall_s, "simulated_s": simulated_s,
-            "speedup": simulated_s / wall_s}
+    return {"runs": len(runs), "failed": len(failed), "wall_s": wall_s, "cpu_s": cpu_s, "simulated_s": simulated_s,
+            "speedup": simulated_s / wall_s, "speedup_per_cpu_s": simulated_s / cpu_s,
+            "jobs": jobs or min(len(runs), os.cpu_count() or 1)}
 
 
 def main(argv: list[str] | None = None) -> int:

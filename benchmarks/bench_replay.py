@@ -50,19 +50,26 @@ def measure(protocol: str, options: list[str], repeats: int, work: Path) -> dict
             "replay_wall_s": best, "replay_speed_x": duration_s / best, "run_speed_x": duration_s / run_s}
 
 
+def run(quick: bool = False, repeats: int = 3) -> dict:
+    """Every case recorded once and replayed `repeats` times; the summary `main` prints."""
+    cases = QUICK if quick else CASES
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = [measure(p, opts, repeats, Path(tmp)) for p, opts in cases.items()]
+    total_recorded = sum(r["recording_s"] for r in rows)
+    total_replay = sum(r["replay_wall_s"] for r in rows)
+    return {"load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count(), "rows": rows,
+            "recorded_s": total_recorded, "replay_wall_s": total_replay,
+            "overall_replay_speed_x": total_recorded / total_replay, "goal_x": GOAL}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="shorter protocols (fewer repetitions)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    cases = QUICK if args.quick else CASES
-    with tempfile.TemporaryDirectory() as tmp:
-        rows = [measure(p, opts, args.repeats, Path(tmp)) for p, opts in cases.items()]
-    total_recorded = sum(r["recording_s"] for r in rows)
-    total_replay = sum(r["replay_wall_s"] for r in rows)
-    summary = {"load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count(), "rows": rows,
-               "overall_replay_speed_x": total_recorded / total_replay, "goal_x": GOAL}
+    summary = run(args.quick, args.repeats)
+    rows, total_recorded, total_replay = summary["rows"], summary["recorded_s"], summary["replay_wall_s"]
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0

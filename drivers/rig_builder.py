@@ -4,6 +4,7 @@ identical in both. Backend names and their settings are documented in docs/rig-f
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any, Callable
 
@@ -12,6 +13,16 @@ from hamr_bench.config import Section, section
 from hamr_bench.errors import ConfigError
 
 TrafficSink = Callable[[str, float, str, bytes], None]
+
+
+@contextlib.contextmanager
+def _blamed_on(table: Section, keys: str):
+    """A device that refuses a setting (a DAQ channel it does not have, say) reports it in its own words; say
+    where in the rig file the setting came from."""
+    try:
+        yield
+    except ConfigError as exc:
+        raise ConfigError(f"{table.where(keys)}: {exc}") from None
 
 
 def _serial_opener(device: str, clock: Clock, traffic: TrafficSink | None):
@@ -72,7 +83,8 @@ def build_force_sensor(table: Section, clock: Clock, ports: dict[str, Any], traf
     )
     table.check_no_unknown_keys()
     daq = ports.get("daq") or _real_daq(table, clock)
-    return AtiNano17(daq, clock, cal, **settings)
+    with _blamed_on(table, "gauge_channels"):
+        return AtiNano17(daq, clock, cal, **settings)
 
 
 def _real_daq(table: Section, clock: Clock):
@@ -97,10 +109,12 @@ def build_amplifiers(table: Section, clock: Clock, ports: dict[str, Any], max_vo
     table.mark_used("daq_device")
     table.check_no_unknown_keys()
     daq = ports.get("daq") or _real_daq(table, clock)
-    bias = TrekAmplifier(daq, clock, ao_channel=channels["bias_output"], monitor_channel=channels["bias_monitor"],
-                         name="bias amplifier", **common)
-    drive = TrekAmplifier(daq, clock, ao_channel=channels["drive_output"],
-                          monitor_channel=channels["drive_monitor"], name="drive amplifier", **common)
+    with _blamed_on(table, "bias_output/bias_monitor"):
+        bias = TrekAmplifier(daq, clock, ao_channel=channels["bias_output"],
+                             monitor_channel=channels["bias_monitor"], name="bias amplifier", **common)
+    with _blamed_on(table, "drive_output/drive_monitor"):
+        drive = TrekAmplifier(daq, clock, ao_channel=channels["drive_output"],
+                              monitor_channel=channels["drive_monitor"], name="drive amplifier", **common)
     return bias, drive
 
 

@@ -193,7 +193,7 @@ class SimBench:
                              frame_rate_Hz=s.camera_frame_rate_Hz,
                              modes=((s.camera_width_px, s.camera_height_px, max(s.camera_frame_rate_Hz, 1.0)),),
                              read_noise_e=5.0 if s.noise else 0.0)
-        self.camera = SimCamera(self.clock, self.rng["camera"], self.marker_px, spec)
+        self.camera = SimCamera(self.clock, self.rng["camera"], self.marker_px_many, spec)
 
     def _register(self, role: str, endpoint: Any) -> str:
         name = f"{self._name}-{role}"
@@ -254,6 +254,16 @@ class SimBench:
         limit = self.powertrain.voltage_limit_V
         return np.clip(vb, -limit, limit), np.clip(vd, -limit, limit)
 
+    def _drive_scalar(self, time_s: float) -> tuple[float, float]:
+        """`drive_many` for one time in plain floats (the same values; asked once per force-sensor sample)."""
+        if self.memory.active:
+            vb, vd = self.drive_many(np.array([time_s]))
+            return float(vb[0]), float(vd[0])
+        limit = self.powertrain.voltage_limit_V
+        vb = self.daq.output_voltage_V("ao0", time_s)
+        vd = self.daq.output_voltage_V("ao1", time_s)
+        return min(max(vb, -limit), limit), min(max(vd, -limit), limit)
+
     def drive_at(self, time_s: float) -> tuple[float, float]:
         if self._drive_cache is not None and self._drive_cache[0] == time_s:
             return self._drive_cache[1]
@@ -265,7 +275,7 @@ class SimBench:
     def surface_m(self, times_s: np.ndarray) -> np.ndarray:
         """How far the sensor surface is pushed in past first touch (the sag, for the leg), at each time."""
         s = self.settings
-        positions = np.array([self.stage.position_m(float(t)) for t in np.atleast_1d(times_s)])
+        positions = np.array(self.stage.positions_m(np.atleast_1d(times_s).tolist()))
         return (positions - s.touch_stage_m) * s.toward_sign
 
     def _pressing_force(self, vb: np.ndarray, vd: np.ndarray, surface_m: np.ndarray) -> np.ndarray:
@@ -303,13 +313,14 @@ class SimBench:
     def contact_force_N(self, time_s: float) -> float:
         """Scalar form for the serial sensor emulator, which asks once per sample. During dwells the drive and
         the stage hold still, so the same state recurs for hundreds of samples: remember the last answers."""
-        t = np.array([time_s])
-        vb, vd = self.drive_many(t)
-        surface = self.surface_m(t)
-        key = (float(vb[0]), float(vd[0]), float(surface[0]))
+        time_s = float(time_s)
+        vb, vd = self._drive_scalar(time_s)
+        s = self.settings
+        surface = (self.stage.position_m(time_s) - s.touch_stage_m) * s.toward_sign
+        key = (vb, vd, surface)
         force = self._force_cache.get(key)
         if force is None:
-            force = float(self._contact_from_state(vb, vd, surface)[0])
+            force = float(self._contact_from_state(np.array([vb]), np.array([vd]), np.array([surface]))[0])
             if len(self._force_cache) > 4096:
                 self._force_cache.clear()
             self._force_cache[key] = force
@@ -341,6 +352,24 @@ class SimBench:
         """Image position of the marker: displacement runs down the image (+y)."""
         x0, y0 = self.settings.marker_origin_px
         return x0, y0 + self.marker_position_m(time_s) / self.settings.metres_per_pixel
+
+    def marker_px_many(self, times_s: np.ndarray) -> np.ndarray:
+        """`marker_px` at every time of `times_s` in one vectorised pass, shape (n, 2): the camera asks for all the
+        motion samples of an exposure at once (per-sample calls dominated the camera protocol's cost)."""
+        t = np.atleast_1d(np.asarray(times_s, dtype=float))
+        vb, vd = self.drive_many(t)
+        surface = self.surface_m(t)
+        c = self.sensor_compliance_m_per_N
+        force = self._pressing_force(vb, vd, surface) if not c else self.contact_forces_N(t)
+        if self.settings.fixture == "leg":
+            free = -self.free_foot_height_m(vb, vd)
+        else:
+            free = act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain.plate_voltage_map)
+        position_m = np.where(force > 0, -(surface - force * c), free)
+        x0, y0 = self.settings.marker_origin_px
+        return np.column_stack([np.full(t.shape, float(x0)), y0 + position_m / self.settings.metres_per_pixel])
+
+    marker_px_many.vectorised = True  # type: ignore[attr-defined]
 
     def truth(self) -> dict[str, Any]:
         """The parameters this bench simulates with, for the recording's metadata (fit-back tests read it)."""

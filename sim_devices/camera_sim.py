@@ -7,7 +7,8 @@ of any position estimate, is computable exactly (`expected_electrons`, `pixel_va
   over each pixel (pixel centres at integer coordinates, OpenCV's convention), with `spot_e_per_s x exposure`
   electrons in total, on a uniform background of `background_e_per_pixel_per_s x exposure`;
 - motion blur: the spot is averaged over `motion_samples` positions spread across the exposure, asked of the
-  bench's `marker_px(time_s) -> (x, y)` callback;
+  bench's `marker_px(time_s) -> (x, y)` callback (or, if the callback has `vectorised = True`, with the array of
+  those times at once, returning shape (n, 2));
 - shot noise (Poisson), read noise (Gaussian, `read_noise_e`), then `gain_DN_per_e`, rounding and clipping to
   `bit_depth` (uint8 or uint16).
 
@@ -148,7 +149,8 @@ def render_frame(spec: SimCameraSpec, positions_px: np.ndarray, exposure_s: floa
     height, width = shape
     if table is None:
         table = background_dn_table(spec, spec.background_e_per_pixel_per_s * exposure_s)
-    image = table[rng.integers(0, 2**_LUT_BITS, size=shape, dtype=np.uint16)]
+    # np.take: the same lookup as table[indices], at about 60 % of the cost of fancy indexing on a full frame
+    image = np.take(table, rng.integers(0, 2**_LUT_BITS, size=shape, dtype=np.uint16))
     pos = np.atleast_2d(np.asarray(positions_px, dtype=float))
     reach = int(math.ceil(7 * spec.spot_sigma_px)) + 1
     x0 = max(int(math.floor(pos[:, 0].min())) - reach, 0)
@@ -239,7 +241,10 @@ class SimCamera:
             self._clock.sleep(end_s - now)
         m = self._spec.motion_samples
         times = start_s + (np.arange(m) + 0.5) / m * exposure
-        positions = np.array([self._marker_px(float(t)) for t in times], dtype=float).reshape(m, 2)
+        if getattr(self._marker_px, "vectorised", False):  # one call for the exposure's motion samples
+            positions = np.asarray(self._marker_px(times), dtype=float).reshape(m, 2)
+        else:
+            positions = np.array([self._marker_px(float(t)) for t in times], dtype=float).reshape(m, 2)
         key = (exposure, self._spec.background_e_per_pixel_per_s)
         if self._table_key != key:
             self._table = background_dn_table(self._spec, exposure * self._spec.background_e_per_pixel_per_s)

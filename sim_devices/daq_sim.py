@@ -318,12 +318,32 @@ class SimDaq:
     def _output(self, ch: _AoChannel, t: np.ndarray, apply_trip: bool = True) -> np.ndarray:
         if t.size == 1:
             return np.array([self._output_at(ch, float(t.flat[0]), apply_trip)])
+        if t.size and ch.segments and ch.tau_s > 0:
+            lo = bisect.bisect_right(ch.starts_s, float(t.min())) - 1
+            if lo >= 0 and bisect.bisect_right(ch.starts_s, float(t.max())) - 1 == lo:
+                # every time in one segment (a monitor read): the loop below without its index bookkeeping
+                seg = ch.segments[lo]
+                if math.isfinite(seg.dt_s):
+                    k = np.clip(((t - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
+                    tk = seg.t0_s + k * seg.dt_s
+                else:
+                    k = np.zeros(t.shape, dtype=int)
+                    tk = np.full(t.shape, seg.t0_s)
+                target, yk = seg.target_V[k], seg.y_V[k]
+                out = target + (yk - target) * np.exp(-(t - tk) / ch.tau_s)
+                if apply_trip and ch.tripped_at_s is not None:
+                    out[t >= ch.tripped_at_s] = 0.0
+                return out
         out = np.zeros_like(t, dtype=float)
-        if ch.segments:
+        if ch.segments and t.size:
             if t.size == 1:  # the bench's usual question: no array conversion of the whole history
                 idx = np.array([bisect.bisect_right(ch.starts_s, float(t[0])) - 1])
             else:
-                idx = np.searchsorted(np.asarray(ch.starts_s), t, side="right") - 1
+                # Only the segments between the first and last time asked matter: converting the whole history
+                # (tens of thousands of ramp steps) to an array on every monitor read dominated the bench's cost.
+                lo = max(bisect.bisect_right(ch.starts_s, float(t.min())) - 1, 0)
+                hi = bisect.bisect_right(ch.starts_s, float(t.max()))
+                idx = np.searchsorted(np.asarray(ch.starts_s[lo:hi]), t, side="right") - 1 + lo
             for i in np.unique(idx[idx >= 0]):
                 sel = idx == i
                 seg = ch.segments[i]
@@ -346,6 +366,10 @@ class SimDaq:
     def output_voltage_V(self, channel: str, time_s: float | np.ndarray) -> float | np.ndarray:
         """The amplifier's output (volts on the actuator) at `time_s` for the amplifier on AO `channel`."""
         ch = self._channel(channel)
+        if type(time_s) is float:  # the bench's per-sample question: no array machinery (same value)
+            if time_s < self._clock.now_s() - self._history_s:
+                raise ConfigError(f"sim DAQ: output at t={time_s:g} s is older than history_s={self._history_s:g}")
+            return self._output_at(ch, time_s)
         t = np.atleast_1d(np.asarray(time_s, dtype=float))
         if t.size and t.min() < self._clock.now_s() - self._history_s:
             raise ConfigError(

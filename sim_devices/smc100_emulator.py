@@ -12,6 +12,7 @@ bench."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from hamr_bench.clock import Clock
@@ -270,6 +271,19 @@ class Smc100Emulator:
         """True mechanical position of the carriage at `time_s` (backlash included), for the bench."""
         self.update(min(time_s, self.clock.now_s()))
         return self._find(time_s).mech_at(time_s)
+
+    def positions_m(self, times_s: Sequence[float]) -> list[float]:
+        """`position_m` at each time. With no stage fault scheduled the controller is settled once (to the latest
+        time asked, or now) instead of once per time: the same positions, since motion history is kept and
+        settling only changes state codes. (A fault truncates the motion it hits, so then each time is asked in
+        turn, as `position_m` would.)"""
+        times = [float(t) for t in times_s]
+        if not times:
+            return []
+        if any(self.faults.any_scheduled(name) for name in STAGE_FAULTS):
+            return [self.position_m(t) for t in times]
+        self.update(min(max(times), self.clock.now_s()))
+        return [self._find(t).mech_at(t) for t in times]
 
     def take_error_letter(self) -> str:
         letter, self.error_letter = self.error_letter, "@"

@@ -73,6 +73,7 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
     metadata_names: list[str] = []
     source_run_end: dict[str, str] | None = None
     start_time_ns: int | None = None
+    damaged: list[str] = []
     last_log: int | None = None
     first_log: int | None = None
     orphans = 0
@@ -106,12 +107,16 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
             if record.name == "run_end":
                 source_run_end = dict(record.values)
                 return
-            if record.name == "recording" and "start_time_ns" in record.values:
+            values = dict(record.values)
+            if record.name == "recording" and "start_time_ns" in values:
                 try:
-                    start_time_ns = int(record.values["start_time_ns"])
+                    start_time_ns = int(values["start_time_ns"])
                 except ValueError:
-                    pass
-            writer.add_metadata(record.name, record.values)
+                    # Metadata records carry no CRC: a damaged run-start time must not make the rebuilt file
+                    # unreadable. Drop it; readers then count time from the first message.
+                    del values["start_time_ns"]
+                    damaged.append("recording.start_time_ns")
+            writer.add_metadata(record.name, values)
             metadata_names.append(record.name)
 
     try:
@@ -140,6 +145,7 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                 "last_time_s": "" if last_time_s is None else repr(last_time_s),
                 "recover_chunks_skipped": str(status.chunks_skipped),
                 "recover_orphan_messages": str(orphans),
+                "recover_damaged_metadata": ",".join(damaged),
             }
         )
         writer.add_metadata("run_end", run_end)

@@ -17,6 +17,11 @@ Overflow: the queue is bounded (messages and image bytes). With `when_full="drop
 callers that must never stall) a sample that does not fit is dropped, counted per topic, reported by `stats()` and
 recorded in `run_end`; nothing is dropped silently. With `when_full="block"` (offline writers: importer, replay)
 the caller waits for room instead.
+
+Camera frames: each is written in a chunk of its own, stored uncompressed (chunk compression `""`, CRC kept), while
+every other chunk uses the file's compression. Frames are PNG already and camera noise does not compress: LZ4
+saved under 20 % of a 640x480 frame for more than twice the writer's other cost per frame (docs/performance.md).
+`compress_images=True` compresses them like the rest.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -109,6 +115,7 @@ class Recorder:
         max_queue_messages: int = 500_000,
         max_queue_bytes: int = 256 * 1024 * 1024,
         when_full: str = "drop",
+        compress_images: bool = False,
     ) -> None:
         from mcap.writer import CompressionType, Writer
 
@@ -143,6 +150,11 @@ class Recorder:
         from hamr_bench import __version__
 
         self._writer.start(profile="", library=f"hamr-bench {__version__}")
+        # Camera frames go in chunks of their own, stored uncompressed (see _add_stored_image), unless asked
+        # otherwise or the installed mcap writer does not expose its per-chunk compression setting.
+        self._file_compression = self._writer.__dict__.get("_Writer__compression")
+        self._store_images = (not compress_images and compression != "none"
+                              and self._file_compression is not None)
 
         # Producer side (any thread).
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -266,9 +278,14 @@ class Recorder:
             finite = False
         if not finite:
             raise RecordingError(f"topic {topic}: image time_s={time_s!r} is not a finite time")
-        msg = CompressedImage(frame_id=frame_id, format="jpeg" if format == "jpg" else format, data=data)
-        msg.timestamp.FromNanoseconds(self.start_time_ns + round(time_s * 1e9))
-        payload = msg.SerializeToString()
+        image_format = "jpeg" if format == "jpg" else format
+        timestamp_ns = self.start_time_ns + round(time_s * 1e9)
+        try:
+            payload = compressed_image_payload(timestamp_ns, frame_id, image_format, data)
+        except (TypeError, ValueError, OverflowError):  # odd inputs: let protobuf encode (or refuse) them
+            msg = CompressedImage(frame_id=frame_id, format=image_format, data=data)
+            msg.timestamp.FromNanoseconds(timestamp_ns)
+            payload = msg.SerializeToString()
         self._put(channel, time_s, payload)
 
     def write_bytes(self, topic: str, time_s: float, direction: str, data: bytes) -> None:
@@ -495,6 +512,7 @@ class Recorder:
         out_of_order = self._w_out_of_order
         is_image = self._w_is_image
         interval = self.flush_interval_s
+        store_images = self._store_images
         next_flush = time.monotonic() + interval
         dirty = False
         wake = self._wake
@@ -528,7 +546,10 @@ class Recorder:
                         out_of_order[index] += 1
                     else:
                         last_log[index] = log_ns
-                    add(channel_ids[index], log_ns, payload, log_ns, 0)
+                    if is_image[index] and store_images:
+                        self._add_stored_image(channel_ids[index], log_ns, payload)
+                    else:
+                        add(channel_ids[index], log_ns, payload, log_ns, 0)
                     written[index] += 1
                     if is_image[index]:
                         with self._lock:
@@ -550,6 +571,22 @@ class Recorder:
                     self._sync()
                     dirty = False
                 next_flush = time.monotonic() + interval
+
+    def _add_stored_image(self, channel_id: int, log_ns: int, payload: bytes) -> None:
+        """One frame in a chunk of its own, stored uncompressed: LZ4 costs more than twice the rest of writing a
+        640x480 frame and, camera noise being incompressible, saves under 20 % of its size (frames are already
+        PNG). The chunk keeps its CRC, and the chunk of scalars before it is closed (compressed) first. The mcap
+        writer compresses every chunk alike, so its setting is switched for this one chunk."""
+        from mcap.writer import CompressionType
+
+        w = self._writer
+        w.flush()  # closes the chunk in progress with the file's compression
+        w.__dict__["_Writer__compression"] = CompressionType.NONE
+        try:
+            w.add_message(channel_id, log_ns, payload, log_ns, 0)
+            w.flush()
+        finally:
+            w.__dict__["_Writer__compression"] = self._file_compression
 
     def _sync(self) -> None:
         self._writer.flush()
@@ -606,6 +643,48 @@ class Recorder:
             done.set()
             return True
         raise AssertionError(f"unknown recorder operation {op}")
+
+
+def _varint(value: int) -> bytes:
+    """Protobuf base-128 varint; negative int64 values as their 64-bit two's complement (10 bytes)."""
+    if value < 0:
+        value += 1 << 64
+    out = bytearray()
+    while value > 0x7F:
+        out.append((value & 0x7F) | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def compressed_image_payload(timestamp_ns: int, frame_id: str, image_format: str, data: bytes) -> bytes:
+    """The bytes `foxglove.CompressedImage(timestamp, frame_id, data, format).SerializeToString()` gives, built with
+    one copy of `data` (protobuf copies a frame twice: into the message, then out of it; at 100 fps of 640x480 that
+    was about 1 % of a core). Fields in number order, defaults (0, empty) left out, as protobuf writes them; the
+    timestamp sub-message is always present (the recorder always sets it)."""
+    seconds, nanos = divmod(int(timestamp_ns), 1_000_000_000)
+    if not -(1 << 63) <= seconds < (1 << 63):
+        raise OverflowError(f"timestamp {timestamp_ns} ns out of range")
+    stamp = (b"\x08" + _varint(seconds) if seconds else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+    values = {"timestamp": stamp, "frame_id": frame_id.encode("utf-8"), "data": data,
+              "format": image_format.encode("utf-8")}
+    parts = []
+    for name, tag in _image_field_tags():
+        value = values[name]
+        if value or name == "timestamp":  # a timestamp that was set is written even when it is zero
+            parts += [tag, _varint(len(value)), value]
+    return b"".join(parts)
+
+
+@lru_cache(maxsize=1)
+def _image_field_tags() -> tuple[tuple[str, bytes], ...]:
+    """(field name, length-delimited tag byte) of foxglove.CompressedImage in field-number order, from its
+    descriptor (the schema's numbering is not its declaration order)."""
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
+    fields = sorted(CompressedImage.DESCRIPTOR.fields, key=lambda f: f.number)
+    assert {f.name for f in fields} == {"timestamp", "frame_id", "data", "format"} and fields[-1].number < 16
+    return tuple((f.name, bytes([(f.number << 3) | 2])) for f in fields)
 
 
 def _fsync_directory(directory: Path) -> None:
