@@ -455,26 +455,42 @@ def _group(key: str, specs, reference, out: FitOutcome, obs, y, pred, method) ->
     return GroupFit(key, params, rms_N, rms_m, len(obs), out.chi2, out.dof, method, warnings)
 
 
+def _fit_actuator_task(args: tuple) -> GroupFit:
+    dataset, layers, method, intervals, level = args
+    return fit_actuator(dataset, layers, method, intervals, level)
+
+
+def _fit_transmission_task(args: tuple) -> GroupFit:
+    dataset, design, method, intervals, actuators, level = args
+    return fit_transmission(dataset, design, method, intervals, fitted_actuators=actuators, level=level)
+
+
 def fit_dataset(dataset: Dataset, method: str = "least-squares", intervals: bool = True,
                 actuator_source: str = "recording", designs: Iterable[int] | None = None,
-                level: float = 0.95) -> FitReport:
+                level: float = 0.95, jobs: int | None = 1, scheduler: Any = None) -> FitReport:
     """Fit every actuator layer count and every design present in the dataset (intervals at confidence `level`;
-    the JSON keeps the name ci95, so callers that change it must say so)."""
+    the JSON keeps the name ci95, so callers that change it must say so). The groups are independent fits:
+    `jobs` spreads them over local processes (None: one per core), `scheduler` over a Dask cluster."""
+    from analysis.parallel import parallel_map
+
     if not 0.5 < level < 1.0:
         raise ConfigError(f"confidence level {level!r}: expected a number between 0.5 and 1")
     if method not in METHODS:
         raise ConfigError(f"--method {method!r}: expected one of {', '.join(METHODS)}")
     report = FitReport(method, {}, {})
-    for layers in sorted({o.layers for o in dataset.observations if o.fixture == "actuator"}):
-        report.actuators[layers] = fit_actuator(dataset, layers, method, intervals, level)
+    layer_counts = sorted({o.layers for o in dataset.observations if o.fixture == "actuator"})
+    fitted = parallel_map(_fit_actuator_task, [(dataset, n, method, intervals, level) for n in layer_counts],
+                          jobs=jobs, scheduler=scheduler)
+    report.actuators.update(zip(layer_counts, fitted))
     wanted = sorted({o.design for o in dataset.observations
                      if o.fixture == "leg" and o.design is not None and o.protocol in LEG_FIT_PROTOCOLS})
     if designs is not None:
         wanted = [d for d in wanted if d in set(designs)]
-    for d in wanted:
-        report.designs[d] = fit_transmission(dataset, d, method, intervals,
-                                             fitted_actuators=report.actuators if actuator_source == "fit" else None,
-                                             level=level)
+    actuators = report.actuators if actuator_source == "fit" else None
+    fitted = parallel_map(_fit_transmission_task,
+                          [(dataset, d, method, intervals, actuators, level) for d in wanted],
+                          jobs=jobs, scheduler=scheduler)
+    report.designs.update(zip(wanted, fitted))
     if not report.actuators and not report.designs:
         report.warnings.append("no fittable observations (actuator or blocked-force/sag-sweep/free-displacement)")
     return report

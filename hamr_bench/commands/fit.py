@@ -17,6 +17,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "or the one fitted from actuator recordings of the same layer count")
     parser.add_argument("--no-intervals", action="store_true", help="point estimates only (skip the profiles)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--jobs", type=int, default=None,
+                        help="local worker processes for the independent group fits (default: one per core)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the group fits on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.set_defaults(func=run)
 
 
@@ -49,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.fit import fit_dataset
 
     dataset = load_dataset(args.recordings)
-    report = fit_dataset(dataset, args.method, intervals=not args.no_intervals, actuator_source=args.actuator)
+    report = fit_dataset(dataset, args.method, intervals=not args.no_intervals, actuator_source=args.actuator,
+                         jobs=args.jobs, scheduler=args.scheduler)
     print(report.to_json() if args.json else format_report(report))
     return 0

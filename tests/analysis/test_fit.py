@@ -107,3 +107,16 @@ def test_transmission_interval_coverage_over_fixed_seeds():
                 z2.append(((p.value - t[name]) / (half / 1.96)) ** 2)
     assert covered >= 21, f"{covered}/{total}"
     assert 0.3 < float(np.mean(z2)) < 2.0, z2
+
+
+def test_group_fits_on_worker_processes_give_the_same_answer():
+    """`--jobs`: the design fits are independent, so spreading them over processes changes nothing."""
+    from analysis.dataset import Dataset
+    from analysis.fit import fit_dataset
+
+    parts = [table_dataset(d, seed=5, noise=QUIET) for d in (1, 4)]
+    both = Dataset([r for p in parts for r in p.runs], [o for p in parts for o in p.observations])
+    serial = fit_dataset(both, intervals=False, jobs=1).as_json()
+    pooled = fit_dataset(both, intervals=False, jobs=2).as_json()
+    assert serial["designs"].keys() == {"1", "4"} or serial["designs"].keys() == {1, 4}
+    assert pooled == serial
