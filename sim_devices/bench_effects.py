@@ -37,6 +37,9 @@ EFFECTS: dict[str, tuple[str, str, float]] = {
     "sensor_compliance": ("m/N", "force-sensor spring compliance; strength = 1 / k_sensor", 1.0 / 2000.0),
     "stage_backlash": ("m", "dead band of the stage on reversal", 5e-6),
     "sensor_drift": ("N/sqrt(s)", "force-sensor baseline random walk", 2e-5),
+    # decoys for the gap diagnosis's self-check: physical effects OUTSIDE its candidate library
+    "amplifier_gain_error": ("fraction", "HV amplifier gain below nominal: every plate sees (1 - s) x V", 0.08),
+    "flexure_softening": ("fraction", "warm Kapton: every flexure stiffness kappa_i scaled by (1 - s)", 0.3),
 }
 REALISTIC: dict[str, float] = {name: spec[2] for name, spec in EFFECTS.items()}
 
@@ -101,9 +104,33 @@ class BiasError(Effect):
         return dataclasses.replace(design, bias_m=design.bias_m + self.strength)
 
 
+@dataclass(frozen=True)
+class AmplifierGainError(Effect):
+    """Decoy: both HV channels deliver (1 - strength) of the commanded voltage (per-plate voltage scaled)."""
+
+    name: str = "amplifier_gain_error"
+
+    def plate_voltage(self, v_plate_V, actuator):
+        return np.asarray(v_plate_V, dtype=float) * (1.0 - min(self.strength, 0.9))
+
+
+@dataclass(frozen=True)
+class FlexureSoftening(Effect):
+    """Decoy: every flexure joint softer by the fraction `strength` (Kapton modulus falls with temperature)."""
+
+    name: str = "flexure_softening"
+
+    def design_params(self, design):
+        import dataclasses
+
+        k = tuple(float(x) * (1.0 - min(self.strength, 0.9)) for x in design.kappa_N_m_per_rad)
+        return dataclasses.replace(design, kappa_N_m_per_rad=k)
+
+
 def model_effects(effects: dict[str, float]) -> list[Effect]:
     makers = {"field_dependent_d31": TanhFieldD31, "base_compliance": RotationalBaseCompliance,
-              "width_loss": WidthLoss, "bias_error": BiasError}
+              "width_loss": WidthLoss, "bias_error": BiasError,
+              "amplifier_gain_error": AmplifierGainError, "flexure_softening": FlexureSoftening}
     return [makers[name](strength=s) for name, s in effects.items() if name in makers and s != 0]
 
 
@@ -137,6 +164,9 @@ class DriveMemory:
         return self.hysteresis > 0 or self.creep > 0
 
     def many(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if np.size(times_s) == 0:  # an empty query (a DAQ validating its channels): nothing to look up
+            empty = np.empty(np.shape(times_s))
+            return empty, empty.copy()
         if not self.active:
             return self._voltages_at(times_s)
         self._extend_to(float(np.max(times_s)))

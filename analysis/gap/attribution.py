@@ -1,0 +1,358 @@
+"""Which effect, and how far it closes the gap: fit the promising candidates alone and in pairs, judge them on
+held-out conditions (leave-one-fold-of-conditions-out plus the extrapolation corner: highest voltage / largest sag),
+give each a strength with a 95 % interval, a verdict, and the gap reduction with a bootstrap interval over
+conditions. `diagnose` is the whole pipeline (residual map -> screening -> attribution).
+
+Decision rules (fixed before any benchmark, documented in docs/gap.md):
+- a gap exists when the nominal lack-of-fit test gives p < 0.001;
+- a candidate is promising when its in-sample improvement of chi^2, scaled by the remaining over-dispersion, passes
+  a likelihood-ratio test at 0.01 / (number of candidates);
+- among the promising, held-out z-error decides (held-out errors within 10 % are a tie, which goes to a single
+  candidate before a pair, then to the better in-sample chi^2); the winner is `attributed` when its held-out reduction's bootstrap
+  interval is above 0 and it closes at least half of the held-out gap above the noise floor, else `unexplained`;
+- another candidate is confusable with the winner when their held-out errors differ by an amount whose bootstrap
+  interval contains 0 (or by less than 10 %) AND their in-sample chi^2 (same number of parameters) differ by less than the 1 % point of
+  chi^2(1) x over-dispersion: the winner's verdict is then `ambiguous` and `best` is null;
+- the strength interval is the union of the profile-likelihood interval and a delete-a-fold jackknife interval
+  over condition folds (t with K-1 degrees of freedom).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from itertools import combinations
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import brentq, least_squares, minimize_scalar
+
+from analysis.gap import residuals as res
+from analysis.gap import screening
+from analysis.gap.features import GapData
+from analysis.gap.library import CANDIDATES, LINEAR_ONLY
+from analysis.gap.problem import Problem
+
+GAP_ALPHA = 1e-3
+CLOSED_MIN = 0.5
+N_FOLDS = 5
+N_BOOT = 400
+TOP_K = 3
+EQUIVALENT_RATIO = 1.1   # held-out RMS within 10 %: practically equivalent even if consistently ordered
+
+
+def _bounds(name: str) -> tuple[float, float]:
+    return CANDIDATES[name][1]
+
+
+def fit_single(p: Problem, name: str, mask: np.ndarray | None = None, near: float | None = None
+               ) -> tuple[float, float]:
+    """Strength minimising chi^2 on `mask` rows, and that chi^2. `near`: a previous optimum (a held-out fold's
+    refit starts from the full-data strength and searches a bracket of a fifth of the range around it)."""
+    if name in LINEAR_ONLY:
+        return 0.0, p.chi2({name: 0.0}, mask)
+    lo, hi = _bounds(name)
+    f = lambda s: p.chi2({name: float(s)}, mask)
+    if near is not None:
+        a, b = max(lo, near - 0.1 * (hi - lo)), min(hi, near + 0.1 * (hi - lo))
+        r = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": (hi - lo) * 2e-4})
+        return float(r.x), float(r.fun)
+    # coarse grid first: some responses (bias, memory) are not unimodal over the whole range
+    grid = np.linspace(lo, hi, 9)
+    vals = [f(s) for s in grid]
+    j = int(np.argmin(vals))
+    a, b = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+    r = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": (hi - lo) * 1e-4})
+    return (float(r.x), float(r.fun)) if r.fun <= vals[j] else (float(grid[j]), float(vals[j]))
+
+
+def fit_pair(p: Problem, names: tuple[str, str], start: Sequence[float], mask: np.ndarray | None = None
+             ) -> tuple[list[float], float]:
+    nl = [n for n in names if n not in LINEAR_ONLY]
+    if len(nl) == 1:
+        s, c = fit_single(p, nl[0], mask)
+        st = {nl[0]: s}
+        st.update({n: 0.0 for n in names if n in LINEAR_ONLY})
+        c = p.chi2(st, mask)
+        return [st.get(n, 0.0) for n in names], c
+    lo = np.array([_bounds(n)[0] for n in nl])
+    hi = np.array([_bounds(n)[1] for n in nl])
+    x0 = np.clip(np.asarray(start, float), lo, hi)
+    m = np.ones(p.y.size, bool) if mask is None else mask
+
+    def fun(x):
+        z, _ = p.residual(dict(zip(nl, map(float, x))), mask)
+        return z[m]
+
+    r = least_squares(fun, x0, bounds=(lo, hi), x_scale=(hi - lo) * 0.1, diff_step=1e-3, max_nfev=40)
+    return [float(v) for v in r.x], float(np.sum(r.fun ** 2))
+
+
+def strength_ci(p: Problem, name: str, s_hat: float, chi2_min: float, scale2: float) -> list[float]:
+    """Profile-likelihood 95 % interval: chi^2 rises by 3.84 x the over-dispersion scale."""
+    lo, hi = _bounds(name)
+    target = chi2_min + stats.chi2.ppf(0.95, 1) * scale2
+    f = lambda s: p.chi2({name: float(s)}) - target
+    out = []
+    for edge in (lo, hi):
+        try:
+            fe = f(edge)
+        except Exception:  # noqa: BLE001 - a bound outside the model's range: take the bound
+            fe = math.inf
+        if fe <= 0 or edge == s_hat:
+            out.append(float(edge))
+            continue
+        a, b = (edge, s_hat) if edge < s_hat else (s_hat, edge)
+        out.append(float(brentq(f, a, b, xtol=abs(hi - lo) * 1e-4)))
+    return out
+
+
+def jackknife_ci(s_hat: float, fold_strengths: Sequence[float]) -> list[float]:
+    """Delete-a-fold jackknife over condition folds: the spread of the strength when whole conditions are left
+    out carries the model-form error (a candidate form that fits some conditions better than others), which the
+    noise-only profile interval does not."""
+    k = len(fold_strengths)
+    if k < 2:
+        return [s_hat, s_hat]
+    f = np.asarray(fold_strengths, float)
+    se = math.sqrt((k - 1) / k * float(np.sum((f - f.mean()) ** 2)))
+    t = float(stats.t.ppf(0.975, k - 1))
+    return [s_hat - t * se, s_hat + t * se]
+
+
+def condition_folds(p: Problem) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """K folds of whole conditions (replicates stay together), the extrapolation-corner mask (each run's highest
+    voltage and largest sag), and the condition index per row (for the bootstrap)."""
+    conds = [r.condition for r in p.rows]
+    uniq = sorted(set(conds), key=lambda c: (c[0], c[1], c[2], c[3], c[4]))
+    cid = np.array([uniq.index(c) for c in conds])
+    folds = [np.isin(cid, [i for i in range(len(uniq)) if i % N_FOLDS == k]) for k in range(N_FOLDS)]
+    corner = np.zeros(p.y.size, bool)
+    for run in p.data.runs:
+        m = p.run_of == run.index
+        if not m.any():
+            continue
+        v = np.array([r.voltage_V for r in p.rows])
+        s = np.array([r.sag_m for r in p.rows])
+        top_v = m & (v == v[m].max())
+        if run.protocol in ("sag-sweep", "static"):
+            top_v = m & (s == s[m].max())
+        corner |= top_v
+    return [f for f in folds if f.any()], corner, cid
+
+
+def heldout_z(p: Problem, names: Sequence[str], folds: list[np.ndarray], start: Sequence[float],
+              fold_strengths: list | None = None) -> np.ndarray:
+    """Per row, the z-residual when its fold was held out of the fit (strengths and nuisances refitted); the
+    strengths fitted without each fold are appended to `fold_strengths` (for the jackknife interval)."""
+    out = np.zeros(p.y.size)
+    for held in folds:
+        train = ~held
+        if not names:
+            z, _ = p.residual({}, train)
+        elif len(names) == 1 and names[0] in LINEAR_ONLY:
+            z, _ = p.residual({names[0]: 0.0}, train)
+        elif len(names) == 1:
+            s, _ = fit_single(p, names[0], train, near=float(start[0]) if len(start) else None)
+            z, _ = p.residual({names[0]: s}, train)
+            if fold_strengths is not None:
+                fold_strengths.append(s)
+        else:
+            x, _ = fit_pair(p, (names[0], names[1]), start, train)
+            z, _ = p.residual(dict(zip(names, x)), train)
+        out[held] = z[held]
+    return out
+
+
+def _boot(cid: np.ndarray, stat, rng: np.random.Generator, n: int = N_BOOT) -> np.ndarray:
+    uniq = np.unique(cid)
+    idx_of = {c: np.flatnonzero(cid == c) for c in uniq}
+    out = []
+    for _ in range(n):
+        pick = rng.choice(uniq, uniq.size, replace=True)
+        rows = np.concatenate([idx_of[c] for c in pick])
+        out.append(stat(rows))
+    return np.asarray(out)
+
+
+def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence[str] | None = None,
+             seed: int = 0) -> dict[str, Any]:
+    """The whole diagnosis; returns the JSON-ready result (keys `where`, `ranking`, `best`, plus detail)."""
+    t_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    names = list(candidates or CANDIDATES)
+    p = Problem(data, fit_params)
+    z0, _ = p.residual({})
+    n_nuis = p.n_nuisance([])
+    nominal = res.global_test(p, z0, n_nuis)
+    gap = nominal["p_value"] < GAP_ALPHA
+    where = res.regions(p, z0)
+    scr = screening.screen(p, z0, names)
+
+    # fit every candidate alone (in-sample)
+    singles: dict[str, dict[str, Any]] = {}
+    chi0 = float(np.sum(z0 ** 2))
+    for n in names:
+        if n in LINEAR_ONLY:
+            c = p.chi2({n: 0.0})
+            rms, slopes, cov = p.drift_rms_slope({})
+            singles[n] = {"strength": rms, "chi2": c, "df": slopes.size, "slopes": slopes, "cov": cov}
+        else:
+            s, c = fit_single(p, n)
+            singles[n] = {"strength": s, "chi2": c, "df": 1}
+    best_chi = min(v["chi2"] for v in singles.values())
+    dof_best = max(p.y.size - n_nuis - 1, 1)
+    scale2 = max(1.0, best_chi / dof_best)
+    thr = {n: stats.chi2.ppf(1 - 0.01 / len(names), v["df"]) for n, v in singles.items()}
+    promising = sorted([n for n, v in singles.items() if (chi0 - v["chi2"]) / scale2 > thr[n]],
+                       key=lambda n: singles[n]["chi2"])[:TOP_K] if gap else []
+
+    folds, corner, cid = condition_folds(p)
+    folds_all = folds + [corner]
+    hz_nom = heldout_z(p, [], folds, [])
+    # corner: refit without the corner, predict it
+    hz_nom_corner = heldout_z(p, [], [corner], [])
+    entries = []
+    heldz: dict[str, np.ndarray] = {}
+    views: dict[str, Problem] = {}
+    for n in promising:
+        if n not in LINEAR_ONLY:
+            # re-estimate the sensor lags under this candidate, then refit it there
+            q = p.relinearised({n: singles[n]["strength"]})
+            s_new, c_new = fit_single(q, n)
+            singles[n].update(strength=s_new, chi2=c_new)
+        else:
+            q = p
+        views[n] = q
+        fs: list[float] = []
+        hz = heldout_z(q, [n], folds, [singles[n]["strength"]], fs)
+        singles[n]["fold_strengths"] = fs
+        hzc = heldout_z(q, [n], [corner], [singles[n]["strength"]])
+        heldz[n] = hz
+        singles[n]["heldout_z"] = hz
+        singles[n]["corner"] = (float(np.sqrt(np.mean(hz_nom_corner[corner] ** 2))),
+                                float(np.sqrt(np.mean(hzc[corner] ** 2))))
+    # pairs among the promising
+    pairs = {}
+    for a, b in combinations(promising, 2):
+        q = views[a] if a not in LINEAR_ONLY else views[b]
+        x, c = fit_pair(q, (a, b), [singles[a]["strength"], singles[b]["strength"]])
+        if (singles[a]["chi2"] if singles[a]["chi2"] < singles[b]["chi2"] else singles[b]["chi2"]) - c \
+                > stats.chi2.ppf(0.99, 1) * scale2:
+            hz = heldout_z(q, [a, b], folds, x)
+            pairs[(a, b)] = {"strengths": x, "chi2": c, "heldout_z": hz, "view": q}
+            heldz[f"{a}+{b}"] = hz
+
+    def rms(v: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(v ** 2)))
+
+    before = rms(hz_nom)
+    order = sorted(heldz, key=lambda k: rms(heldz[k]))
+    if order:
+        # held-out errors within 10 % are a tie; a tie goes to the simpler model (a single candidate before a
+        # pair), then to the better in-sample chi^2 among single candidates (same number of parameters: AIC order)
+        tied = [k for k in order if "+" not in k and rms(heldz[k]) < EQUIVALENT_RATIO * rms(heldz[order[0]])]
+        if tied:
+            lead = min(tied, key=lambda k: singles[k]["chi2"])
+            order.remove(lead)
+            order.insert(0, lead)
+    winner = order[0] if order else None
+    ranking = []
+    for key in order + [n for n in names if n not in heldz]:
+        is_pair = "+" in key
+        if key in heldz:
+            hz = heldz[key]
+            after = rms(hz)
+            red = 1 - after / before if before > 0 else 0.0
+            boot = _boot(cid, lambda r: 1 - rms(hz[r]) / max(rms(hz_nom[r]), 1e-300), rng)
+            red_ci = [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))]
+            closed = (before - after) / (before - 1.0) if before > 1.0 else 0.0
+        else:
+            after, red, red_ci, closed = None, None, None, None
+        entry: dict[str, Any] = {"effect": key, "heldout_rms_before": before if key in heldz else None,
+                                 "heldout_rms_after": after, "reduction": red, "reduction_ci95": red_ci,
+                                 "closed_fraction": closed, "confusable_with": [], "verdict": "unexplained"}
+        if is_pair:
+            a, b = key.split("+")
+            entry["strength"] = pairs[(a, b)]["strengths"]
+            entry["strength_ci95"] = None
+            entry["unit"] = [CANDIDATES[a][0], CANDIDATES[b][0]]
+        else:
+            v = singles[key]
+            entry["strength"] = v["strength"]
+            entry["unit"] = CANDIDATES[key][0]
+            entry["in_sample_chi2"] = v["chi2"]
+            entry["screen_score_chi2"] = scr["scores"].get(key, {}).get("score_chi2")
+            if key in promising:
+                if key in LINEAR_ONLY:
+                    se = float(np.sqrt(np.mean(np.diag(v["cov"])) * scale2))
+                    entry["strength_ci95"] = [max(0.0, v["strength"] - 1.96 * se), v["strength"] + 1.96 * se]
+                else:
+                    prof = strength_ci(views[key], key, v["strength"], v["chi2"], scale2)
+                    jack = jackknife_ci(v["strength"], v.get("fold_strengths", []))
+                    entry["strength_ci95"] = [min(prof[0], jack[0]), max(prof[1], jack[1])]
+                    entry["strength_ci95_profile"] = prof
+                entry["extrapolation_corner_rms"] = {"before": v["corner"][0], "after": v["corner"][1]}
+            else:
+                entry["strength_ci95"] = None
+        ranking.append(entry)
+
+    best = None
+    if winner is not None:
+        w = ranking[0]
+        confusable = []
+        for other in order[1:]:
+            if "+" in other or "+" in winner:
+                continue
+            diff = _boot(cid, lambda r: float(np.mean(heldz[other][r] ** 2) - np.mean(heldz[winner][r] ** 2)),
+                         rng, 200)
+            in_sample = abs(singles[other]["chi2"] - singles[winner]["chi2"]) / scale2 if other in singles \
+                and winner in singles else 0.0
+            close_heldout = np.percentile(diff, 2.5) <= 0 or rms(heldz[other]) < EQUIVALENT_RATIO * rms(heldz[winner])
+            if close_heldout and in_sample < stats.chi2.ppf(0.99, 1):
+                confusable.append(other)
+        first_order = screening.confusable_pairs(scr["cos"]).get(winner, [])
+        w["confusable_with"] = confusable
+        w["first_order_confusable"] = first_order
+        ok = w["reduction_ci95"][0] > 0 and (w["closed_fraction"] or 0) >= CLOSED_MIN
+        if ok and confusable:
+            w["verdict"] = "ambiguous"
+        elif ok:
+            w["verdict"] = "attributed"
+            best = winner
+        for e in ranking[1:]:
+            if e["effect"] in confusable:
+                e["verdict"] = "ambiguous" if ok else "unexplained"
+                e["confusable_with"] = [winner]
+        # regions the winner closes / leaves
+        if winner in singles:
+            z_after, _ = views[winner].residual({winner: singles[winner]["strength"]})
+        else:
+            a, b = winner.split("+")
+            z_after, _ = pairs[(a, b)]["view"].residual(dict(zip((a, b), pairs[(a, b)]["strengths"])))
+        after_regions = {(g.protocol, g.condition): g for g in res.regions(p, z_after)}
+        closes, leaves = [], []
+        for g in where:
+            if g.p_value >= res.ALPHA:
+                continue
+            ga = after_regions.get((g.protocol, g.condition))
+            (closes if ga is not None and ga.p_value >= res.ALPHA else leaves).append(
+                f"{g.protocol}: {g.condition}")
+        w["closes"], w["leaves"] = closes, leaves
+        w["lack_of_fit_p_after"] = res.global_test(p, z_after, n_nuis + 1)["p_value"]
+
+    return {
+        "where": [g.to_json() for g in where],
+        "ranking": ranking,
+        "best": best,
+        "gap_above_noise": bool(gap),
+        "nominal_lack_of_fit": nominal,
+        "phase_map": res.phase_map(p, z0),
+        "screening": {n: v for n, v in scr["scores"].items()},
+        "signature_cos": {f"{a}|{b}": c for (a, b), c in scr["cos"].items()},
+        "sensor_lag_s": {f"{k[0]}/{k[1]}": v for k, v in p.lag.items()},
+        "heldout_units": "noise units (z = residual / pure-error standard error)",
+        "elapsed_s": time.perf_counter() - t_start,
+        "_problem": p,
+    }

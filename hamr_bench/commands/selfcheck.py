@@ -1,0 +1,38 @@
+"""`hamr-bench selfcheck [--trials N] [--seed S] [--jobs J] --json`: the gap diagnosis checked blind on the
+simulated bench (hidden effect of random type and realistic strength, null cases, decoys; analysis/gap/selfcheck.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("selfcheck", help="blind check of the gap diagnosis on the simulated bench")
+    parser.add_argument("--trials", type=int, default=20, help="number of blind trials (default 20)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the trial draws (default 0)")
+    parser.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (default 1)")
+    parser.add_argument("--null-fraction", type=float, default=0.15, help="share of no-effect trials")
+    parser.add_argument("--decoy-fraction", type=float, default=0.1, help="share of decoy trials")
+    parser.add_argument("--json", action="store_true", help="print the scores as JSON")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hamr_bench.errors import ConfigError
+
+    if args.trials < 1:
+        raise ConfigError(f"--trials: expected at least 1, got {args.trials}")
+    if not (0 <= args.null_fraction and 0 <= args.decoy_fraction and args.null_fraction + args.decoy_fraction <= 1):
+        raise ConfigError("--null-fraction and --decoy-fraction: expected shares in [0, 1] summing to at most 1")
+    from analysis.gap.selfcheck import selfcheck
+
+    out = selfcheck(trials=args.trials, seed=args.seed, jobs=max(1, args.jobs), null_fraction=args.null_fraction,
+                    decoy_fraction=args.decoy_fraction, progress=not args.json)
+    if args.json:
+        print(json.dumps(out, indent=1, default=float))
+    else:
+        summary = {k: v for k, v in out.items() if k not in ("per_trial", "confusion")}
+        for k, v in summary.items():
+            print(f"{k}: {v}")
+    return 0
