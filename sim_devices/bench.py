@@ -306,9 +306,22 @@ class SimBench:
         force = self._pressing_force(vb, vd, surface)
         c = self.sensor_compliance_m_per_N
         if c > 0 and np.any(force > 0):
-            for _ in range(4):  # the sensor gives way by F c and the foot follows; converges fast (k_s >> k_leg)
-                force = self._pressing_force(vb, vd, surface - force * c)
+            force = self._compliant_contact(vb, vd, surface, force, c)
         return force
+
+    def _compliant_contact(self, vb, vd, surface, rigid_force, c: float) -> np.ndarray:
+        """Force when the sensor itself gives way by F c: the root of g(F) = F - P(surface - F c) on
+        [0, P(surface)], P the rigid pressing force. g rises monotonically (P falls as the surface retreats), so
+        bisection always converges, whether the sensor is much stiffer than the leg or, as against a bare
+        actuator, softer (where a plain fixed-point iteration oscillates)."""
+        lo = np.zeros_like(rigid_force)
+        hi = np.array(rigid_force, dtype=float)
+        for _ in range(48):  # 2^-48 of the rigid force: far below any sensor's resolution
+            mid = 0.5 * (lo + hi)
+            above = mid - self._pressing_force(vb, vd, surface - mid * c) > 0
+            hi = np.where(above, mid, hi)
+            lo = np.where(above, lo, mid)
+        return 0.5 * (lo + hi)
 
     def contact_force_N(self, time_s: float) -> float:
         """Scalar form for the serial sensor emulator, which asks once per sample. During dwells the drive and

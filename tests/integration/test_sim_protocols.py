@@ -111,3 +111,28 @@ def test_actuator_blocked_force_and_free_displacement_match_model(tmp_path):
             means = dwell_means(reader, "/camera/displacement", "displacement_m", V, start, end, margin_s=0.15)
             stroke = np.mean(means["high"]) - np.mean(means["low"])
             assert stroke == pytest.approx(2 * float(actuator.free_displacement_m(V)), rel=0.03)
+
+
+@pytest.mark.parametrize("fixture, compliance_m_per_N", [("actuator", 1 / 2000.0), ("leg", 1 / 2000.0)])
+def test_sensor_compliance_contact_is_the_series_spring_solution(fixture, compliance_m_per_N):
+    """With a compliant sensor the contact force solves F = P(surface - F c), P the rigid pressing force; for a
+    linear actuator tip that is the series-spring law F = F_rigid k_s / (k_s + k_act), also when the sensor is
+    softer than the actuator (k_act c > 1), where a naive iteration would oscillate."""
+    from sim_devices.bench import BenchSettings, SimBench
+
+    bench = SimBench(BenchSettings(fixture=fixture, layers=3, effects={"sensor_compliance": compliance_m_per_N},
+                                   noise=False))
+    try:
+        vb = np.array([200.0, 250.0])
+        vd = vb.copy()
+        surface = np.array([0.0, 0.5e-3]) if fixture == "leg" else np.array([0.0, 0.0])
+        rigid = bench._pressing_force(vb, vd, surface)
+        force = bench._contact_from_state(vb, vd, surface)
+        residual = force - bench._pressing_force(vb, vd, surface - force * compliance_m_per_N)
+        assert np.all(np.abs(residual) < 1e-9 * rigid)
+        if fixture == "actuator":
+            k_act, k_s = bench.actuator.stiffness_N_per_m, 1 / compliance_m_per_N
+            assert k_act * compliance_m_per_N > 1  # the case that used to oscillate
+            np.testing.assert_allclose(force, rigid * k_s / (k_s + k_act), rtol=1e-9)
+    finally:
+        bench.close()
