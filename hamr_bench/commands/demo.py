@@ -46,8 +46,16 @@ def run(args: argparse.Namespace) -> int:
     quiet = ["--quiet"] if args.quiet else []
     looks: list[str] = []
 
+    def shown(argv: list[str]) -> str:
+        """The command as a person would type it: the campaign's files as one glob."""
+        files = [a for a in argv if a.startswith(str(campaign)) and a.endswith(".mcap")]
+        if len(files) > 1:
+            argv = [a for a in argv if a not in files[1:]]
+            argv[argv.index(files[0])] = f"{campaign}/*.mcap"
+        return " ".join(a if a else "''" for a in argv)
+
     def step(title: str, argv: list[str]) -> bool:
-        print(f"\n== {title}\n$ hamr-bench {' '.join(argv)}", flush=True)
+        print(f"\n== {title}\n$ hamr-bench {shown(argv)}", flush=True)
         start = time.perf_counter()
         code = main(argv)
         print(f"   ({time.perf_counter() - start:.1f} s, exit {code})", flush=True)
@@ -70,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         fit_json = out / "fit.json"
         print("\n== 4. Fit the model's parameters to the recordings")
         argv = ["fit", *recordings, "--json"]
-        print(f"$ hamr-bench {' '.join(argv[:2])} ... --json > {fit_json}")
+        print(f"$ hamr-bench {shown(argv)} > {fit_json}")
         import contextlib
         import io
 
@@ -89,7 +97,9 @@ def run(args: argparse.Namespace) -> int:
     if _available("replay") and _available("compare"):
         source = next((r for r in recordings if "blocked-force" in r), recordings[0])
         twin = out / "twin.mcap"
-        if step("6. Replay one run through the nominal simulated bench", ["replay", source, "--out", str(twin)]):
+        # No effects and another seed: the twin is what the nominal model predicts under the same commands.
+        if step("6. Replay one run through the nominal simulated bench",
+                ["replay", source, "--out", str(twin), "--effects", "", "--seed", str(args.seed + 1), *quiet]):
             step("   ... and compare the two", ["compare", source, str(twin), "--plots", str(out / "compare")])
             looks.append(f"{out / 'compare'}/  the recording overlaid on its nominal-model twin")
     else:
