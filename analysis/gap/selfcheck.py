@@ -223,7 +223,9 @@ def _trial_worker(args: tuple[int, float, float]) -> Trial | str:
 
 
 def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: float = 0.15,
-              decoy_fraction: float = 0.1, progress: bool = False, raw_path: str | None = None) -> dict[str, Any]:
+              decoy_fraction: float = 0.1, progress: bool = False, raw_path: str | None = None,
+              scheduler: Any = None) -> dict[str, Any]:
+    """Blind trials, scored. `jobs` local processes, or `scheduler` a Dask cluster (analysis.parallel)."""
     seeds = [seed * 100_000 + i for i in range(trials)]
     args = [(s, null_fraction, decoy_fraction) for s in seeds]
     done: list[Trial] = []
@@ -235,15 +237,14 @@ def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: flo
             n = len(done) + len(errors)
             print(f"trial {n}/{trials}: " + (t if isinstance(t, str) else f"{t.truth} -> {t.best}"), flush=True)
 
-    if jobs <= 1:
+    if jobs <= 1 and scheduler is None:
         for a in args:
             take(_trial_worker(a))
     else:
-        from concurrent.futures import ProcessPoolExecutor
+        from analysis.parallel import parallel_map
 
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            for t in pool.map(_trial_worker, args):
-                take(t)
+        for t in parallel_map(_trial_worker, args, jobs=jobs, scheduler=scheduler):
+            take(t)
     if raw_path is not None:   # keep the raw trials even if scoring fails
         import json
 

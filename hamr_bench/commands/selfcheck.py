@@ -12,6 +12,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--trials", type=int, default=20, help="number of blind trials (default 20)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the trial draws (default 0)")
     parser.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (default 1)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the trials on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.add_argument("--null-fraction", type=float, default=0.15, help="share of no-effect trials")
     parser.add_argument("--decoy-fraction", type=float, default=0.1, help="share of decoy trials")
     parser.add_argument("--json", action="store_true", help="print the scores as JSON")
@@ -28,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.gap.selfcheck import selfcheck
 
     out = selfcheck(trials=args.trials, seed=args.seed, jobs=max(1, args.jobs), null_fraction=args.null_fraction,
-                    decoy_fraction=args.decoy_fraction, progress=not args.json)
+                    decoy_fraction=args.decoy_fraction, progress=not args.json, scheduler=args.scheduler)
     if args.json:
         print(json.dumps(out, indent=1, default=float))
     else:
