@@ -62,7 +62,10 @@ def test_ctrl_c_aborts_with_a_closed_recording(tmp_path):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-m", "hamr_bench", "run", "blocked-force", "--sim", "--quiet", "--out", str(out),
-         "--set", "repetitions=40"], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+         "--set", "repetitions=40"], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+        # A shell that started the test suite in the background ignores SIGINT, and children inherit that: give
+        # the run the terminal's default, as when a person presses Ctrl-C.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     # Interrupt once the run is well under way: the recording exists and holds data.
     while time.monotonic() < deadline and (not out.exists() or out.stat().st_size < 200_000):
