@@ -149,7 +149,6 @@ def _build_items(reader: Any, events: list[Any]) -> list[Any]:
         seq += 1
 
     kinds = {e.kind for e in events}
-    safe = [e for e in events if e.kind == "safe_state"]
     # --- events -> operations
     for e in events:
         if e.kind == "home":

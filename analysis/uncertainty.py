@@ -298,7 +298,6 @@ def fit_problem(problem: Problem, method: str = "least-squares", intervals: bool
     JtJ = J.T @ J
     cov = np.linalg.pinv(JtJ + 1e-12 * np.eye(p) * max(1.0, float(np.trace(JtJ)) / p))
     s2 = chi2 / dof if dof > 0 else 1.0
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None) * s2)
     # conditional (all others fixed) standard deviations: the profile search's first step never overshoots
     sd_cond = np.sqrt(s2 / np.maximum(np.diag(JtJ), 1e-300))
     with np.errstate(invalid="ignore", divide="ignore"):

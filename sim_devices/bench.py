@@ -17,7 +17,6 @@ puts the foot or tip. `ports()` gives what a rig builder hands the real drivers.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -137,7 +136,6 @@ class SimBench:
         self.actuator = self.powertrain.actuator
         self.sensor_compliance_m_per_N = effects.get("sensor_compliance", 0.0)
         self._free_height_table = self._tabulate_free_height() if s.fixture == "leg" else None
-        self._drive_cache: tuple[float, tuple[float, float]] | None = None
         self._force_cache: dict[tuple[float, float, float], float] = {}
         self._name = f"bench{next(_bench_ids)}"
         self._endpoints: list[str] = []
@@ -263,14 +261,6 @@ class SimBench:
         vb = self.daq.output_voltage_V("ao0", time_s)
         vd = self.daq.output_voltage_V("ao1", time_s)
         return min(max(vb, -limit), limit), min(max(vd, -limit), limit)
-
-    def drive_at(self, time_s: float) -> tuple[float, float]:
-        if self._drive_cache is not None and self._drive_cache[0] == time_s:
-            return self._drive_cache[1]
-        vb, vd = self.drive_many(np.array([time_s]))
-        drive = (float(vb[0]), float(vd[0]))
-        self._drive_cache = (time_s, drive)
-        return drive
 
     def surface_m(self, times_s: np.ndarray) -> np.ndarray:
         """How far the sensor surface is pushed in past first touch (the sag, for the leg), at each time."""

@@ -209,11 +209,9 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                        key=lambda n: singles[n]["chi2"])[:TOP_K] if gap else []
 
     folds, corner, cid = condition_folds(p)
-    folds_all = folds + [corner]
     hz_nom = heldout_z(p, [], folds, [])
     # corner: refit without the corner, predict it
     hz_nom_corner = heldout_z(p, [], [corner], [])
-    entries = []
     heldz: dict[str, np.ndarray] = {}
     views: dict[str, Problem] = {}
     for n in promising:

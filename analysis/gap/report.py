@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.gap import residuals as res
 
 
 def _fitted(problem, strengths: dict) -> np.ndarray:

@@ -12,7 +12,6 @@ The generator forms (sim_devices.bench_effects) differ from the candidate forms 
 
 from __future__ import annotations
 
-import math
 import tempfile
 import time
 from dataclasses import dataclass

@@ -25,7 +25,7 @@ on a coarse grid across the linkage's range, the stable crossing (G from - to +)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+
 from typing import Sequence
 
 import numpy as np
