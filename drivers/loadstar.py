@@ -16,7 +16,7 @@ import serial
 
 from drivers.serial_line import PortOpener, SerialLine
 from hamr_bench.clock import Clock
-from hamr_bench.errors import DeviceFault, DeviceProtocolError, DeviceTimeout
+from hamr_bench.errors import ConfigError, DeviceFault, DeviceProtocolError, DeviceTimeout
 from hamr_bench.interfaces import ForceSample
 
 NEWTONS_PER_UNIT: dict[str, float] = {
@@ -82,6 +82,8 @@ class LoadstarSensor:
         self._streaming = False
         self._last_stream_data_s = 0.0
         self._last_sample_s = -math.inf
+        if not (isinstance(baudrate, (int, float)) and baudrate > 0):
+            raise ConfigError(f"{device}: baudrate must be a positive number, got {baudrate!r}")
         self._byte_time_s = 10.0 / float(baudrate)  # 8N1: a start bit, 8 data bits, a stop bit
         self._line = SerialLine(
             url_or_port,

@@ -36,7 +36,7 @@ def _serial_opener(device: str, clock: Clock, traffic: TrafficSink | None):
 
 
 def build_stage(table: Section, clock: Clock, port: str | None, traffic: TrafficSink | None):
-    backend = table.str("backend", choices=("smc100",))
+    table.str("backend", choices=("smc100",))
     from drivers.newport_smc100 import NewportSMC100
 
     settings = dict(
@@ -61,7 +61,7 @@ def build_force_sensor(table: Section, clock: Clock, ports: dict[str, Any], traf
 
         settings = dict(
             command_set=table.str("command_set", "di1000", choices=("di1000", "iload")),
-            baudrate=table.int("baudrate", 9600),
+            baudrate=table.int("baudrate", 9600, lo=1),
             timeout_s=table.float("timeout_s", 0.5, positive=True),
             stream_rate_Hz=table.float("stream_rate_Hz", 150.0, positive=True),
         )

@@ -8,6 +8,7 @@ from typing import Any
 
 from hamr_bench.config import Section, section
 from sim_devices.bench import BenchSettings, SimBench, parse_fault
+from sim_devices.bench_effects import check_effects
 
 
 def make_bench(
@@ -19,7 +20,8 @@ def make_bench(
     amp = section(doc, source, "amplifier")
     camera = section(doc, source, "camera", required=False) or Section(source, "camera", {})
     defaults = BenchSettings()
-    file_effects = sim.table_of_floats("effects")
+    file_effects = check_effects(sim.table_of_floats("effects"), sim.where("effects"))
+    check_effects(dict(effects or {}), "--effects")
     file_design = sim.int("design", defaults.design, lo=1, hi=5)
     file_layers = sim.int("layers", defaults.layers, lo=1, hi=3)
     file_seed = sim.int("seed", defaults.seed)
