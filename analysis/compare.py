@@ -19,8 +19,15 @@ Per channel and step:
   stamp error becomes a value error: per sample, |dx/dt| x (median spacing / sqrt 12), for each side;
 - the difference exceeds noise when sqrt(mean(d_i^2 / v_i)) > EXCEED_FACTOR, with v_i = sigma_A^2 + sigma_B^2 +
   both sides' timing noise at sample i. Two records of the same signal with independent noise give a ratio ~ 1,
-  so above 3 means a systematic difference of roughly 2.8 sigma or more. The mean difference's z-score
-  (mean / (sigma_d / sqrt n), sigma_d = sqrt(sigma_A^2 + sigma_B^2)) is reported too.
+  so above 3 means a systematic difference of roughly 2.8 sigma or more;
+- or the step carries a steady offset: the mean difference's z-score (mean / (sigma_d / sqrt n), sigma_d =
+  sqrt(sigma_A^2 + sigma_B^2)) exceeds OFFSET_Z AND the mean difference is at least sigma_d and at least
+  OFFSET_FRACTION of the channel's span over both recordings. The RMS test alone misses a shift of about one
+  sigma held over hundreds of samples (hysteresis moves every high dwell by ~5 % of a noisy force signal); the
+  z-score alone flags offsets too small to matter, because a step's samples are not independent (slow sensor noise
+  moves a whole step's mean by a fraction of sigma from run to run) and because 0.1 V on a 250 V drive monitor is
+  statistically clear but irrelevant. So an offset must also be as large as one sample's noise and of practical
+  size, 1 % of span being about what bench instruments are specified to (load cells 0.1-1 % of full scale).
 """
 
 from __future__ import annotations
@@ -43,6 +50,8 @@ CHANNELS = {  # measured streams (commands are inputs: a replay copies them)
     "displacement_m": ("/camera/displacement", "displacement_m"),
 }
 EXCEED_FACTOR = 3.0
+OFFSET_Z = 5.0
+OFFSET_FRACTION = 0.01
 MIN_SAMPLES = 3
 
 
@@ -157,11 +166,19 @@ def side_noise(side: Side, channel: str, index: int, x: np.ndarray) -> float:
     return max(white_noise(x), replicate_noise(side, channel, index), side.resolution.get(channel, 0.0))
 
 
+def _span(xa: np.ndarray, xb: np.ndarray) -> float:
+    """Range of a channel over both recordings (finite values only): the scale an offset is judged against."""
+    x = np.concatenate([xa, xb])
+    x = x[np.isfinite(x)]
+    return float(x.max() - x.min()) if x.size else 0.0
+
+
 def compare_recordings(path_a: Path | str, path_b: Path | str) -> dict[str, Any]:
     """The comparison as a JSON-ready dict (see the module docstring for the definitions)."""
     a, b = load_side(path_a), load_side(path_b)
     common_steps = sorted(set(a.steps) & set(b.steps))
     common_channels = [c for c in CHANNELS if c in a.channels and c in b.channels]
+    span = {c: _span(a.channels[c][1], b.channels[c][1]) for c in common_channels}
     steps_out = []
     summary: dict[str, dict[str, Any]] = {c: {"steps_compared": 0, "steps_exceeding": 0, "max_rms_over_noise": 0.0,
                                              "max_abs_diff": 0.0} for c in common_channels}
@@ -186,12 +203,15 @@ def compare_recordings(path_a: Path | str, path_b: Path | str) -> dict[str, Any]
             with np.errstate(divide="ignore", invalid="ignore"):
                 terms = np.where(variance > 0, d ** 2 / variance, np.where(d == 0, 0.0, np.inf))
             ratio = float(np.sqrt(np.mean(terms)))
-            exceeds = bool(ratio > EXCEED_FACTOR)
+            mean_z = mean / (noise_d / math.sqrt(d.size)) if noise_d > 0 else (0.0 if mean == 0 else math.inf)
+            floor = max(noise_d, OFFSET_FRACTION * span[channel])
+            offset = bool(abs(mean_z) > OFFSET_Z and abs(mean) > floor)
+            exceeds = bool(ratio > EXCEED_FACTOR) or offset
             entry["channels"][channel] = {
                 "n": int(d.size), "mean_diff": mean, "rms_diff": rms, "max_abs_diff": float(np.max(np.abs(d))),
                 "noise_a": noise_a, "noise_b": noise_b, "noise_diff": noise_d,
                 "timing_noise_rms": float(np.sqrt(np.mean(timing ** 2))), "rms_over_noise": ratio,
-                "mean_z": mean / (noise_d / math.sqrt(d.size)) if noise_d > 0 else (0.0 if mean == 0 else math.inf),
+                "mean_z": mean_z, "offset_floor": floor, "steady_offset": offset,
                 "exceeds_noise": exceeds}
             s = summary[channel]
             s["steps_compared"] += 1
@@ -203,6 +223,7 @@ def compare_recordings(path_a: Path | str, path_b: Path | str) -> dict[str, Any]
         s["exceeds_noise"] = s["steps_exceeding"] > 0
     return {
         "a": str(a.path), "b": str(b.path), "exceed_factor": EXCEED_FACTOR,
+        "offset_z": OFFSET_Z, "offset_fraction": OFFSET_FRACTION,
         "channels": summary, "steps": steps_out,
         "steps_only_in_a": sorted(set(a.steps) - set(b.steps)),
         "steps_only_in_b": sorted(set(b.steps) - set(a.steps)),
@@ -220,10 +241,12 @@ def format_comparison(result: dict[str, Any]) -> str:
     beyond = [(st["index"], st["label"], ch, v) for st in result["steps"] for ch, v in st["channels"].items()
               if v["exceeds_noise"]]
     if beyond:
-        lines.append(f"beyond noise (RMS of (A-B)/noise > {result['exceed_factor']:g}):")
+        lines.append(f"beyond noise (RMS of (A-B)/noise > {result['exceed_factor']:g}, or a steady offset: "
+                     f"|mean z| > {result['offset_z']:g} and |mean| > noise and > {result['offset_fraction']:.0%} of span):")
         for index, label, ch, v in beyond:
-            lines.append(f"  step {index} ({label}) {ch}: mean {v['mean_diff']:.4g}, RMS {v['rms_diff']:.4g}, "
-                         f"noise {v['noise_diff']:.4g}")
+            why = "steady offset" if v["steady_offset"] else "RMS"
+            lines.append(f"  step {index} ({label}) {ch}: mean {v['mean_diff']:.4g} (z {v['mean_z']:.3g}), "
+                         f"RMS {v['rms_diff']:.4g}, noise {v['noise_diff']:.4g} [{why}]")
     else:
         lines.append("no channel differs beyond noise in any step")
     for key in ("steps_only_in_a", "steps_only_in_b", "channels_only_in_a", "channels_only_in_b"):

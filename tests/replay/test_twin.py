@@ -127,3 +127,17 @@ def test_fit_json_maps_onto_model_fields(tmp_path):
     fit.write_text(json.dumps({"designs": {"4": {"k_ser": {"value": "stiff"}}}}))
     with pytest.raises(ConfigError, match=r"designs\.4\.k_ser"):
         model_overrides_from_fit(fit, design=4, layers=2)
+
+
+def test_steady_offset_of_a_missing_effect_is_beyond_noise(source_run, tmp_path):
+    # The source has hysteresis; its nominal twin does not. Hysteresis lowers every driven step's force by about
+    # one sample's noise, steadily: the RMS test alone does not see it, the steady-offset test must.
+    nominal = tmp_path / "nominal.mcap"
+    replay_recording(source_run, nominal, effects={}, seed=SOURCE_SEED + 1)
+    comparison = compare_recordings(source_run, nominal)
+    force_steps = [s["channels"]["force_N"] for s in comparison["steps"] if s["index"] >= 0]
+    offsets = [f for f in force_steps if f["steady_offset"]]
+    assert len(offsets) >= len(force_steps) // 2
+    assert all(f["mean_diff"] < 0 and abs(f["mean_diff"]) >= f["noise_diff"] for f in offsets)
+    for channel in ("stage_position_m", "bias_monitor_V", "drive_monitor_V"):
+        assert not comparison["channels"][channel]["exceeds_noise"], channel
