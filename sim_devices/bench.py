@@ -268,14 +268,18 @@ class SimBench:
         positions = np.array(self.stage.positions_m(np.atleast_1d(times_s).tolist()))
         return (positions - s.touch_stage_m) * s.toward_sign
 
-    def _pressing_force(self, vb: np.ndarray, vd: np.ndarray, surface_m: np.ndarray) -> np.ndarray:
+    def _pressing_force(self, vb: np.ndarray, vd: np.ndarray, surface_m: np.ndarray,
+                        free_height_m: np.ndarray | None = None) -> np.ndarray:
         """Force on a rigid surface `surface_m` in past first touch; 0 out of contact (vectorised). The model is
-        only asked where there is contact: a surface far from the foot may lie outside the linkage's reach."""
+        only asked where there is contact: a surface far from the foot may lie outside the linkage's reach.
+        `free_height_m` (leg only): the free foot height at (vb, vd), when the caller has it already."""
         vb, vd, surface_m = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (vb, vd, surface_m)))
         force = np.zeros(surface_m.shape)
         vmap = self.powertrain.plate_voltage_map
         if self.settings.fixture == "leg":
-            touching = self.free_foot_height_m(vb, vd) < surface_m
+            if free_height_m is None:
+                free_height_m = self.free_foot_height_m(vb, vd)
+            touching = free_height_m < surface_m
             if touching.any():
                 force[touching] = self.powertrain.foot_force_N(vb[touching], vd[touching], surface_m[touching])
         else:
@@ -363,11 +367,13 @@ class SimBench:
         vb, vd = self.drive_many(t)
         surface = self.surface_m(t)
         c = self.sensor_compliance_m_per_N
-        force = self._pressing_force(vb, vd, surface) if not c else self.contact_forces_N(t)
         if self.settings.fixture == "leg":
-            free = -self.free_foot_height_m(vb, vd)
+            height = self.free_foot_height_m(vb, vd)
+            free = -height
         else:
+            height = None
             free = act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain.plate_voltage_map)
+        force = self._pressing_force(vb, vd, surface, height) if not c else self.contact_forces_N(t)
         position_m = np.where(force > 0, -(surface - force * c), free)
         x0, y0 = self.settings.marker_origin_px
         return np.column_stack([np.full(t.shape, float(x0)), y0 + position_m / self.settings.metres_per_pixel])

@@ -12,6 +12,13 @@ of any position estimate, is computable exactly (`expected_electrons`, `pixel_va
 - shot noise (Poisson), read noise (Gaussian, `read_noise_e`), then `gain_DN_per_e`, rounding and clipping to
   `bit_depth` (uint8 or uint16).
 
+Background noise: a full frame of exact draws costs more than the rest of a frame together, so the camera draws a
+pool of `BACKGROUND_POOL_FRAMES` frames' worth of background pixels (from `background_dn_table`, the exact
+distribution) once per exposure setting, and each frame's background is a window into it at a random offset. Every
+pixel's distribution is exact and pixels within a frame are independent; two frames share values only as a copy
+shifted by the difference of their offsets. The patch around the marker (out to 7 sigma of the spot) is drawn
+afresh for every frame with `digitise`, so what tracking sees is unaffected.
+
 Timing on the bench's clock: frame k is exposed over [k / fps, k / fps + exposure]; `read()` returns the next
 frame and, if its exposure has not ended, waits (through the clock) until it has. A reader that falls more
 than `buffer_frames` behind loses the oldest frames, as a driver's ring buffer does. `get(CAP_PROP_POS_MSEC)`
@@ -115,6 +122,7 @@ def digitise(spec: SimCameraSpec, mean_e: np.ndarray, rng: np.random.Generator) 
 
 
 _LUT_BITS = 16
+BACKGROUND_POOL_FRAMES = 16
 
 
 def background_dn_table(spec: SimCameraSpec, mean_e: float) -> np.ndarray:
@@ -141,16 +149,27 @@ def background_dn_table(spec: SimCameraSpec, mean_e: float) -> np.ndarray:
     return table.astype(np.uint8 if spec.bit_depth == 8 else np.uint16)
 
 
-def render_frame(spec: SimCameraSpec, positions_px: np.ndarray, exposure_s: float, shape: tuple[int, int],
-                 rng: np.random.Generator, table: np.ndarray | None = None) -> np.ndarray:
-    """A noisy frame: background pixels from `background_dn_table`, and the patch where the spot (over its
-    motion path, out to 7 sigma, where it adds < 1e-10 of its electrons per pixel) is drawn with
-    `digitise`."""
-    height, width = shape
-    if table is None:
-        table = background_dn_table(spec, spec.background_e_per_pixel_per_s * exposure_s)
+def draw_background(table: np.ndarray, n_pixels: int, rng: np.random.Generator) -> np.ndarray:
+    """`n_pixels` independent background values (flat) from a `background_dn_table`."""
     # np.take: the same lookup as table[indices], at about 60 % of the cost of fancy indexing on a full frame
-    image = np.take(table, rng.integers(0, 2**_LUT_BITS, size=shape, dtype=np.uint16))
+    return np.take(table, rng.integers(0, 2**_LUT_BITS, size=n_pixels, dtype=np.uint16))
+
+
+def render_frame(spec: SimCameraSpec, positions_px: np.ndarray, exposure_s: float, shape: tuple[int, int],
+                 rng: np.random.Generator, table: np.ndarray | None = None,
+                 background_pool: np.ndarray | None = None) -> np.ndarray:
+    """A noisy frame: background pixels from `background_dn_table` (fresh draws, or a window at a random offset
+    into `background_pool`, see the module docstring), and the patch where the spot (over its motion path, out to 7
+    sigma, where it adds < 1e-10 of its electrons per pixel) is drawn with `digitise`."""
+    height, width = shape
+    n = height * width
+    if background_pool is not None and background_pool.size >= n:
+        offset = int(rng.integers(0, background_pool.size - n + 1))
+        image = background_pool[offset:offset + n].reshape(shape).copy()
+    else:
+        if table is None:
+            table = background_dn_table(spec, spec.background_e_per_pixel_per_s * exposure_s)
+        image = draw_background(table, n, rng).reshape(shape)
     pos = np.atleast_2d(np.asarray(positions_px, dtype=float))
     reach = int(math.ceil(7 * spec.spot_sigma_px)) + 1
     x0 = max(int(math.floor(pos[:, 0].min())) - reach, 0)
@@ -189,7 +208,8 @@ class SimCamera:
         self._drop_probability = 0.0
         self.frames_lost = 0
         self._table: np.ndarray | None = None
-        self._table_key: tuple[float, float] | None = None
+        self._pool: np.ndarray | None = None
+        self._table_key: tuple[float, float, int, int] | None = None
 
     # ---- faults --------------------------------------------------------------------------------------------
     def inject_fault(self, name: str, strength: float = 1.0, at_s: float | None = None) -> None:
@@ -245,12 +265,14 @@ class SimCamera:
             positions = np.asarray(self._marker_px(times), dtype=float).reshape(m, 2)
         else:
             positions = np.array([self._marker_px(float(t)) for t in times], dtype=float).reshape(m, 2)
-        key = (exposure, self._spec.background_e_per_pixel_per_s)
+        key = (exposure, self._spec.background_e_per_pixel_per_s, self._height, self._width)
         if self._table_key != key:
             self._table = background_dn_table(self._spec, exposure * self._spec.background_e_per_pixel_per_s)
+            self._pool = draw_background(self._table, BACKGROUND_POOL_FRAMES * self._height * self._width,
+                                         self._rng)
             self._table_key = key
         self._pending = render_frame(self._spec, positions, exposure, (self._height, self._width), self._rng,
-                                     self._table)
+                                     self._table, self._pool)
         self._last_index = k
         self._last_mid_s = start_s + exposure / 2
         return True

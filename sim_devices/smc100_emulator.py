@@ -283,6 +283,12 @@ class Smc100Emulator:
         if any(self.faults.any_scheduled(name) for name in STAGE_FAULTS):
             return [self.position_m(t) for t in times]
         self.update(min(max(times), self.clock.now_s()))
+        last = self._history[-1]
+        first = min(times)
+        if first >= last.t0 and first >= last.t_end:
+            # The usual question (the stage holds still while the drive plays): after its latest motion has
+            # ended the carriage stays where it stopped, so every time gets that one position.
+            return [last.mech_at(first)] * len(times)
         return [self._find(t).mech_at(t) for t in times]
 
     def take_error_letter(self) -> str:

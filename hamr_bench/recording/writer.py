@@ -1,7 +1,7 @@
 """The run recorder: one MCAP file per run, written by a single writer thread fed through a queue.
 
 Callers (the runner's acquisition loop, a camera thread, the importer) only encode and enqueue, which costs a
-microsecond or so per scalar sample; the writer thread owns the `mcap.writer.Writer` (it has no locks) and the file.
+microsecond or so per scalar sample; the writer thread owns the `McapFileWriter` (mcap_file.py; it has no locks) and the file.
 
 Crash safety: the writer thread closes the open chunk, flushes and `os.fsync`s at least every `flush_interval_s`
 of wall time (not rig time: under the virtual clock an hour-long protocol runs in seconds, and durability is about
@@ -46,6 +46,7 @@ import numpy as np
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
 from hamr_bench.recording.images import encode_image
+from hamr_bench.recording.mcap_file import McapFileWriter
 
 EXIT_STATUSES = ("success", "aborted", "failed")
 FORMAT_NAME = "hamr-bench-recording"
@@ -117,8 +118,6 @@ class Recorder:
         when_full: str = "drop",
         compress_images: bool = False,
     ) -> None:
-        from mcap.writer import CompressionType, Writer
-
         self.path = Path(path)
         if not 0 < flush_interval_s <= 1.0:
             raise RecordingError(f"flush_interval_s={flush_interval_s} must be in (0, 1] s")
@@ -138,23 +137,13 @@ class Recorder:
         except OSError as exc:
             raise RecordingError(f"cannot create recording {self.path}: {exc.strerror or exc}") from None
         _fsync_directory(self.path.parent)
-        self._writer = Writer(
-            self._file,
-            chunk_size=int(chunk_size),
-            compression={"lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD, "none": CompressionType.NONE}[
-                compression
-            ],
-            enable_crcs=True,
-            enable_data_crcs=True,
-        )
+        self._writer = McapFileWriter(self._file, chunk_size=int(chunk_size),
+                                      compression="" if compression == "none" else compression)
         from hamr_bench import __version__
 
         self._writer.start(profile="", library=f"hamr-bench {__version__}")
-        # Camera frames go in chunks of their own, stored uncompressed (see _add_stored_image), unless asked
-        # otherwise or the installed mcap writer does not expose its per-chunk compression setting.
-        self._file_compression = self._writer.__dict__.get("_Writer__compression")
-        self._store_images = (not compress_images and compression != "none"
-                              and self._file_compression is not None)
+        # Camera frames go in chunks of their own, stored uncompressed (see _add_stored_image), unless asked otherwise.
+        self._store_images = not compress_images and compression != "none"
 
         # Producer side (any thread).
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -573,20 +562,10 @@ class Recorder:
                 next_flush = time.monotonic() + interval
 
     def _add_stored_image(self, channel_id: int, log_ns: int, payload: bytes) -> None:
-        """One frame in a chunk of its own, stored uncompressed: LZ4 costs more than twice the rest of writing a
-        640x480 frame and, camera noise being incompressible, saves under 20 % of its size (frames are already
-        PNG). The chunk keeps its CRC, and the chunk of scalars before it is closed (compressed) first. The mcap
-        writer compresses every chunk alike, so its setting is switched for this one chunk."""
-        from mcap.writer import CompressionType
-
-        w = self._writer
-        w.flush()  # closes the chunk in progress with the file's compression
-        w.__dict__["_Writer__compression"] = CompressionType.NONE
-        try:
-            w.add_message(channel_id, log_ns, payload, log_ns, 0)
-            w.flush()
-        finally:
-            w.__dict__["_Writer__compression"] = self._file_compression
+        """One frame in a stored (uncompressed) chunk: LZ4 costs more than twice the rest of writing a 640x480 frame
+        and, camera noise being incompressible, saves under 20 % of its size (frames are already PNG). The chunk
+        keeps its CRC; the compressed chunk of scalars before it is closed first."""
+        self._writer.add_message(channel_id, log_ns, payload, log_ns, 0, compression="")
 
     def _sync(self) -> None:
         self._writer.flush()

@@ -73,6 +73,21 @@ def test_background_table_matches_exact_draws() -> None:
     assert fast.var() == pytest.approx(exact.var(), rel=0.03)
 
 
+def test_camera_background_from_its_pool_is_exact_and_uncorrelated_between_frames() -> None:
+    # Frames come from a pool of background draws at random offsets: each frame's background must still have the
+    # exact per-pixel distribution, and a pixel must not repeat its value from frame to frame.
+    spec = SimCameraSpec(width_px=320, height_px=240, exposure_s=2e-3)
+    clock, camera = cam(marker=lambda t: (10.0, 10.0), seed=4, **spec.__dict__)
+    frames = np.array([camera.read()[1] for _ in range(40)], dtype=float)[:, 60:, 60:]
+    exact = digitise(spec, np.full(frames[0].size, 20.0), np.random.default_rng(9)).astype(float)
+    assert frames.mean() == pytest.approx(exact.mean(), abs=0.02)
+    assert frames.var() == pytest.approx(exact.var(), rel=0.03)
+    a, b = frames[:-1].ravel() - frames.mean(), frames[1:].ravel() - frames.mean()
+    correlation = float(np.mean(a * b) / np.sqrt(np.mean(a * a) * np.mean(b * b)))
+    assert abs(correlation) < 0.01  # 1.5 M pixel pairs: the standard error is ~0.001
+    assert not any(np.array_equal(frames[i], frames[i + 1]) for i in range(len(frames) - 1))
+
+
 def test_rendered_frame_is_background_far_from_the_spot_and_bright_on_it() -> None:
     spec = SimCameraSpec(spot_e_per_s=1e7)
     img = render_frame(spec, np.array([[50.0, 40.0]]), 2e-3, (120, 160), np.random.default_rng(3))
