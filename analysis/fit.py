@@ -179,10 +179,12 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
                  method: str, intervals: bool, level: float = 0.95) -> tuple[FitOutcome, np.ndarray]:
     """Weighted fit of physical `specs` plus the `nuisance` offsets; `predict(physical, offsets_per_row)`.
 
-    Two passes. (1) weights from the replicate scatter (`group_sigmas`), fit. (2) each group's sigma re-estimated
-    from its residuals pooled with its replicate scatter (dof-weighted: a group of 8 points with 4 replicate dof is
-    otherwise badly weighted), fit again from the first solution, with profile intervals for the physical
-    parameters. Returns (outcome over physical + nuisance parameters, sigmas)."""
+    Two passes. (1) weights from the replicate scatter (`group_sigmas`), fit (to a looser tolerance: it only sets
+    the weights). (2) each group's sigma re-estimated from its residuals pooled with its replicate scatter
+    (dof-weighted: a group of 8 points with 4 replicate dof is otherwise badly weighted), fit again from the first
+    solution, with profile intervals for the physical parameters. Pass 2 starts with pass 1's Jacobian, its rows
+    rescaled to the new weights (a residual is (prediction - y) / sigma, so this is exact at the same point).
+    Returns (outcome over physical + nuisance parameters, sigmas)."""
     sig = group_sigmas(obs)
     n_phys = len(specs)
     all_specs = tuple(specs) + nuisance.specs
@@ -192,6 +194,8 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
         return predict(p[:n_phys], nuisance.per_row(p[n_phys:]))
 
     def make(sigma: np.ndarray) -> Problem:
+        sigma = sigma.copy()    # this problem's weights (the caller updates its own array between passes)
+
         def residuals(p: np.ndarray) -> np.ndarray:
             pred = full_predict(p)
             if pred is None:
@@ -201,6 +205,7 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
         return Problem(all_specs, all_ref, residuals)
 
     out1 = fit_problem(make(sig), method, intervals=False, tol=1e-4)   # only sets the weights: pass 2 refines
+    sig1 = sig.copy()
     pred = full_predict(out1.values)
     if pred is not None and np.all(np.isfinite(pred)):
         res = pred - y
@@ -215,8 +220,12 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
     z1 = np.array([sp.to_z(v, r) for sp, v, r in zip(all_specs, out1.values, all_ref)])
     # each group's sigma was estimated from these residuals: one degree of freedom each
     n_groups = len({(o.run, o.quantity) for o in obs})
+    J0 = None
+    if out1.jacobian is not None:
+        J0 = out1.jacobian.copy()
+        J0[: y.size] *= (sig1 / sig)[:, None]
     out = fit_problem(make(sig), method, intervals, z0=z1, profile=range(n_phys), level=level,
-                      extra_dof_used=n_groups)
+                      extra_dof_used=n_groups, J0=J0)
     return out, sig
 
 
@@ -402,12 +411,7 @@ def fit_transmission(dataset: Dataset, design: int, method: str = "least-squares
     sigma_h = zero_sag_sigma_m(dataset, obs, a, base, reference)
     nuisance = make_nuisance(obs, lambda o: o.quantity == "force_N", "h0", "m", sigma_h, 0.5e-3)
 
-    def predict(p: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
-        try:
-            return legs.predict(Powertrain(a, design_with(base, dict(zip(names, p)))), offsets)
-        except HamrBenchError:
-            return None
-
+    predict = _CachedLegPrediction(legs, lambda p: Powertrain(a, design_with(base, dict(zip(names, p)))))
     out, _sig = fit_weighted(obs, y, predict, TRANSMISSION_SPECS, reference, nuisance, method, intervals, level)
     n = len(TRANSMISSION_SPECS)
     d = design_with(base, dict(zip(names, out.values[:n])))
@@ -420,6 +424,56 @@ def fit_transmission(dataset: Dataset, design: int, method: str = "least-squares
                  "zero_offsets": {**_offsets_json(dataset, nuisance, out.values[n:], "m"),
                                   "prior_sigma": sigma_h}}
     return g
+
+
+class _CachedLegPrediction:
+    """`predict(physical, offsets_per_row)` for leg rows, keeping the last few Powertrains with their free-foot
+    predictions. Building a Powertrain and solving its free equilibria is most of an evaluation, and neither
+    depends on the per-run zero offsets (they only shift the held foot height of force rows, a closed-form
+    force), so a Jacobian column or a step that moves only offsets reuses them. Same numbers as
+    `LegObservations.predict` on all rows (the rows are split, each part predicted by the same method)."""
+
+    def __init__(self, legs: LegObservations, build, size: int = 4) -> None:
+        self.build = build
+        self.size = size
+        self.n = legs.voltage_V.size
+        self.free_rows = np.flatnonzero(legs.is_free)
+        self.held_rows = np.flatnonzero(~legs.is_free)
+        self.free_legs = LegObservations(legs.protocol[self.free_rows], legs.voltage_V[self.free_rows],
+                                         legs.sag_m[self.free_rows])
+        self.held_legs = LegObservations(legs.protocol[self.held_rows], legs.voltage_V[self.held_rows],
+                                         legs.sag_m[self.held_rows])
+        self.cache: dict[bytes, tuple[Powertrain, np.ndarray] | None] = {}
+
+    def _model(self, p: np.ndarray) -> tuple[Powertrain, np.ndarray] | None:
+        key = np.asarray(p, float).tobytes()
+        if key in self.cache:
+            hit = self.cache.pop(key)
+        else:
+            try:
+                pt = self.build(p)
+                hit = (pt, self.free_legs.predict(pt) if self.free_rows.size else np.empty(0))
+            except HamrBenchError:
+                hit = None
+        self.cache[key] = hit              # most recent last
+        while len(self.cache) > self.size:
+            self.cache.pop(next(iter(self.cache)))
+        return hit
+
+    def __call__(self, p: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
+        hit = self._model(p)
+        if hit is None:
+            return None
+        pt, free_pred = hit
+        out = np.empty(self.n)
+        out[self.free_rows] = free_pred
+        if self.held_rows.size:
+            try:
+                out[self.held_rows] = self.held_legs.predict(pt, np.broadcast_to(np.asarray(offsets, float),
+                                                                                 (self.n,))[self.held_rows])
+            except HamrBenchError:
+                return None
+        return out
 
 
 # ----------------------------------------------------------------------------------------------- common

@@ -4,15 +4,17 @@ parameter-recovery coverage of the 95 % intervals over seeds. Prints the figures
     python3 -m benchmarks.bench_fit [--seeds N] [--json]
 
 Data: tests/analysis/synth.py's per-step observations (the three fitted leg protocols; noise as its recordings)
-generated from Table III / Table I effective. Times are best-of-3 wall clock AND process CPU time of one process
-(the machine may be shared: CPU time is the steadier figure). Coverage counts the identified parameters only
-(k_ser and bias of every design, kappa_1 of designs 2 and 4); parameters reported as upper limits are counted
-separately (their interval is [0, upper], so covering a true value of 0 proves little).
+generated from Table III / Table I effective; the data sets are drawn once, before any timing. Times are best-of-3
+(best-of-1 for Nelder-Mead) wall clock AND process CPU time of one process; the 1-minute load average is printed
+before and after (the machine may be shared: CPU time is the steadier figure). Coverage counts the identified
+parameters only (k_ser and bias of every design, kappa_1 of designs 2 and 4); parameters reported as upper limits
+are counted separately (their interval is [0, upper], so covering a true value of 0 proves little).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -40,12 +42,12 @@ def run(seeds: int = 12) -> dict:
 
     designs = (1, 2, 3, 4)
     data = {d: table_dataset(d, seed=1) for d in designs}
-    out: dict = {}
+    out: dict = {"load_average_before": [round(x, 2) for x in os.getloadavg()], "cpus": os.cpu_count()}
     for method in ("least-squares", "nelder-mead"):
         wall, cpu, _ = _timed(lambda: [fit_transmission(data[d], d, method, intervals=False) for d in designs],
                               repeats=3 if method == "least-squares" else 1)
         out[f"four_designs_point_{method}_s"] = {"wall": wall, "cpu": cpu}
-    wall, cpu, _ = _timed(lambda: [fit_transmission(data[d], d, "least-squares") for d in designs], repeats=1)
+    wall, cpu, _ = _timed(lambda: [fit_transmission(data[d], d, "least-squares") for d in designs], repeats=3)
     out["four_designs_with_intervals_least-squares_s"] = {"wall": wall, "cpu": cpu}
     act = table_actuator_dataset(2, seed=1)
     wall, cpu, _ = _timed(lambda: fit_actuator(act, 2, "least-squares"))
@@ -88,6 +90,7 @@ def run(seeds: int = 12) -> dict:
             n += 1
             hits += int(lo <= value <= hi)
     out["actuator_coverage"] = {"intervals": n, "covered": hits, "fraction": hits / n}
+    out["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
     return out
 
 
