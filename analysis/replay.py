@@ -385,7 +385,8 @@ def replay_recording(source_path: Path | str, out: Path | str, *, params_path: P
         if params_path else {}
     use_seed = seed if seed is not None else (source.seed if source.seed is not None else 0)
     use_effects = dict(effects) if effects is not None else (dict(source.effects) if source.kind == "sim" else {})
-    digest = hashlib.sha256(Path(source_path).read_bytes()).hexdigest()
+    with open(source_path, "rb") as f:  # streamed: a camera run is hundreds of MB, no need to hold it in memory
+        digest = hashlib.file_digest(f, "sha256").hexdigest()
     replay_md = {
         "source": str(Path(source_path).resolve()), "source_sha256": digest, "source_kind": source.kind,
         "source_exit_status": source.exit_status, "source_reason": source.exit_reason,
