@@ -34,8 +34,10 @@ EFFECTS: dict[str, tuple[str, str, float]] = {
     "base_compliance": ("fraction", "imperfect actuator grounding; strength = blocked-force loss at the tip", 0.2),
     "width_loss": ("fraction", "laser-cut edge loss; strength = fraction of the nominal width lost", 0.15),
     "bias_error": ("m", "the transmission's actual bias minus its designed bias", 30e-6),
-    "sensor_compliance": ("m/N", "force-sensor spring compliance; strength = 1 / k_sensor", 1.0 / 2000.0),
-    "stage_backlash": ("m", "dead band of the stage on reversal", 5e-6),
+    # realistic: a sensor 10x stiffer than the 2-layer actuator (~2000 N/m), ~9 % force loss (physics notes s. 4)
+    "sensor_compliance": ("m/N", "force-sensor spring compliance; strength = 1 / k_sensor", 1.0 / 20000.0),
+    # lead-screw stage with a stepper: a few um to tens of um on reversal; 10 um is the middle of that span
+    "stage_backlash": ("m", "dead band of the stage on reversal", 10e-6),
     "sensor_drift": ("N/sqrt(s)", "force-sensor baseline random walk", 2e-5),
     # decoys for the gap diagnosis's self-check: physical effects OUTSIDE its candidate library
     "amplifier_gain_error": ("fraction", "HV amplifier gain below nominal: every plate sees (1 - s) x V", 0.08),

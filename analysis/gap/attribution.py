@@ -7,14 +7,17 @@ Decision rules (fixed before any benchmark, documented in docs/gap.md):
 - a gap exists when the nominal lack-of-fit test gives p < 0.001;
 - a candidate is promising when its in-sample improvement of chi^2, scaled by the remaining over-dispersion, passes
   a likelihood-ratio test at 0.01 / (number of candidates);
+- a candidate defined by a time signature (creep) must carry it: its strength fitted from the within-dwell changes
+  alone must be significantly positive and at least half the full-data strength, else it is not promising;
 - among the promising, held-out z-error decides (held-out errors within 10 % are a tie, which goes to a single
   candidate before a pair, then to the better in-sample chi^2); the winner is `attributed` when its held-out reduction's bootstrap
   interval is above 0 and it closes at least half of the held-out gap above the noise floor, else `unexplained`;
 - another candidate is confusable with the winner when their held-out errors differ by an amount whose bootstrap
   interval contains 0 (or by less than 10 %) AND their in-sample chi^2 (same number of parameters) differ by less than the 1 % point of
   chi^2(1) x over-dispersion: the winner's verdict is then `ambiguous` and `best` is null;
-- the strength interval is the union of the profile-likelihood interval and a delete-a-fold jackknife interval
-  over condition folds (t with K-1 degrees of freedom).
+- the strength interval is the union of the profile-likelihood interval and delete-a-group jackknife intervals
+  over condition folds and over phases within a cycle (t with K-1 degrees of freedom);
+- bootstrap intervals resample whole conditions within each experiment (run and mode).
 """
 
 from __future__ import annotations
@@ -121,6 +124,49 @@ def jackknife_ci(s_hat: float, fold_strengths: Sequence[float]) -> list[float]:
     return [s_hat - t * se, s_hat + t * se]
 
 
+HALLMARK = ("creep",)   # candidates whose defining signature is a change during a constant-drive dwell
+HALLMARK_MIN_SHARE = 0.5   # the dwell contrasts alone must carry at least half the strength (like CLOSED_MIN)
+
+
+def dwell_pairs(p: Problem) -> np.ndarray:
+    """(high_early, high_late) row index pairs of the same step: their difference is the change during a dwell."""
+    idx = {(r.run, r.step, r.phase): i for i, r in enumerate(p.rows)}
+    out = [(idx[(a, b, "high_early")], i) for (a, b, ph), i in idx.items()
+           if ph == "high_late" and (a, b, "high_early") in idx]
+    return np.array(out, int).reshape(-1, 2)
+
+
+def dwell_contrast(p: Problem, name: str, s_hat: float) -> dict[str, Any]:
+    """The candidate's strength fitted from the within-dwell changes alone (late minus early high-dwell rows of
+    each step, nuisances as in the full fit), with its standard error scaled by the contrasts' own
+    over-dispersion. `applicable`: the full-data strength predicts a dwell change this data can detect (1 %);
+    `supported`: the contrast strength is significantly positive (one-sided 1 %) and at least half of s_hat."""
+    pr = dwell_pairs(p)
+    out: dict[str, Any] = {"n_pairs": int(pr.shape[0]), "applicable": False, "supported": True}
+    if pr.shape[0] < 2 or s_hat == 0:
+        return out
+    e, late = pr[:, 0], pr[:, 1]
+    sc = np.hypot(p.sigma[e], p.sigma[late])
+
+    def contrast(strengths: dict[str, float]) -> np.ndarray:
+        z, _ = p.residual(strengths)
+        return (z[late] * p.sigma[late] - z[e] * p.sigma[e]) / sc
+
+    c0 = contrast({})
+    dc = (c0 - contrast({name: s_hat})) / s_hat   # the contrast is linear in a creep-type strength
+    info = float(dc @ dc)
+    if info <= 0:
+        return out
+    g = float(dc @ c0) / info
+    r = c0 - g * dc
+    scale = max(1.0, float(r @ r) / max(r.size - 1, 1))
+    se = math.sqrt(scale / info)
+    applicable = s_hat ** 2 * info / scale > stats.chi2.ppf(0.99, 1)
+    supported = g * np.sign(s_hat) / se > stats.norm.ppf(0.99) and g / s_hat >= HALLMARK_MIN_SHARE
+    out.update(strength=g, se=se, applicable=bool(applicable), supported=bool(supported or not applicable))
+    return out
+
+
 def condition_folds(p: Problem) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """K folds of whole conditions (replicates stay together), the extrapolation-corner mask (each run's highest
     voltage and largest sag), and the condition index per row (for the bootstrap)."""
@@ -140,6 +186,15 @@ def condition_folds(p: Problem) -> tuple[list[np.ndarray], np.ndarray, np.ndarra
             top_v = m & (s == s[m].max())
         corner |= top_v
     return [f for f in folds if f.any()], corner, cid
+
+
+def phase_groups(p: Problem) -> list[np.ndarray]:
+    """Row masks by phase within a cycle (low_late, rise, high_early, high_late, fall, hold). If the candidate's
+    form were the true one, its strength would not depend on which phases it is fitted from; a form that is right
+    on average but wrong in time (a log law against a sum of exponentials) gives different strengths from
+    different phases, which no condition split shows, since every condition shares the same cycle timing."""
+    phases = np.array([r.phase for r in p.rows])
+    return [phases == ph for ph in sorted(set(phases)) if 0 < np.sum(phases == ph) < phases.size]
 
 
 def heldout_z(p: Problem, names: Sequence[str], folds: list[np.ndarray], start: Sequence[float],
@@ -165,12 +220,24 @@ def heldout_z(p: Problem, names: Sequence[str], folds: list[np.ndarray], start: 
     return out
 
 
-def _boot(cid: np.ndarray, stat, rng: np.random.Generator, n: int = N_BOOT) -> np.ndarray:
-    uniq = np.unique(cid)
-    idx_of = {c: np.flatnonzero(cid == c) for c in uniq}
+def condition_strata(p: Problem) -> np.ndarray:
+    """Stratum per row: one experiment (run and mode, e.g. the actuator's blocked steps). The bootstrap resamples
+    conditions WITHIN each stratum, so every resample keeps the experiment plan (an effect seen only in the
+    actuator's three blocked conditions is not dropped from a resample that happens to draw none of them)."""
+    keys = [(r.run, r.mode) for r in p.rows]
+    uniq = sorted(set(keys))
+    return np.array([uniq.index(k) for k in keys])
+
+
+def _boot(cid: np.ndarray, stat, rng: np.random.Generator, n: int = N_BOOT,
+          strata: np.ndarray | None = None) -> np.ndarray:
+    """Bootstrap over whole conditions (stratified by `strata` when given)."""
+    sid = np.zeros(cid.size, int) if strata is None else strata
+    groups = [np.unique(cid[sid == k]) for k in np.unique(sid)]
+    idx_of = {c: np.flatnonzero(cid == c) for c in np.unique(cid)}
     out = []
     for _ in range(n):
-        pick = rng.choice(uniq, uniq.size, replace=True)
+        pick = np.concatenate([rng.choice(g, g.size, replace=True) for g in groups])
         rows = np.concatenate([idx_of[c] for c in pick])
         out.append(stat(rows))
     return np.asarray(out)
@@ -208,7 +275,18 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     promising = sorted([n for n, v in singles.items() if (chi0 - v["chi2"]) / scale2 > thr[n]],
                        key=lambda n: singles[n]["chi2"])[:TOP_K] if gap else []
 
+    # a candidate defined by a time signature must show it: creep that the dwell contrasts do not carry is an
+    # amplitude fit by the wrong mechanism (a gain loss also lowers amplitudes, but does not grow during a dwell)
+    hallmarks: dict[str, dict[str, Any]] = {}
+    for n in list(promising):
+        if n in HALLMARK:
+            h = dwell_contrast(p, n, singles[n]["strength"])
+            hallmarks[n] = h
+            if h["applicable"] and not h["supported"]:
+                promising.remove(n)
+
     folds, corner, cid = condition_folds(p)
+    sid = condition_strata(p)
     hz_nom = heldout_z(p, [], folds, [])
     # corner: refit without the corner, predict it
     hz_nom_corner = heldout_z(p, [], [corner], [])
@@ -226,6 +304,9 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
         fs: list[float] = []
         hz = heldout_z(q, [n], folds, [singles[n]["strength"]], fs)
         singles[n]["fold_strengths"] = fs
+        if n not in LINEAR_ONLY:
+            singles[n]["phase_strengths"] = [fit_single(q, n, ~g, near=singles[n]["strength"])[0]
+                                             for g in phase_groups(q)]
         hzc = heldout_z(q, [n], [corner], [singles[n]["strength"]])
         heldz[n] = hz
         singles[n]["heldout_z"] = hz
@@ -263,7 +344,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
             hz = heldz[key]
             after = rms(hz)
             red = 1 - after / before if before > 0 else 0.0
-            boot = _boot(cid, lambda r: 1 - rms(hz[r]) / max(rms(hz_nom[r]), 1e-300), rng)
+            boot = _boot(cid, lambda r: 1 - rms(hz[r]) / max(rms(hz_nom[r]), 1e-300), rng, strata=sid)
             red_ci = [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))]
             closed = (before - after) / (before - 1.0) if before > 1.0 else 0.0
         else:
@@ -282,6 +363,8 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
             entry["unit"] = CANDIDATES[key][0]
             entry["in_sample_chi2"] = v["chi2"]
             entry["screen_score_chi2"] = scr["scores"].get(key, {}).get("score_chi2")
+            if key in hallmarks:
+                entry["dwell_contrast"] = hallmarks[key]
             if key in promising:
                 if key in LINEAR_ONLY:
                     se = float(np.sqrt(np.mean(np.diag(v["cov"])) * scale2))
@@ -289,8 +372,11 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                 else:
                     prof = strength_ci(views[key], key, v["strength"], v["chi2"], scale2)
                     jack = jackknife_ci(v["strength"], v.get("fold_strengths", []))
-                    entry["strength_ci95"] = [min(prof[0], jack[0]), max(prof[1], jack[1])]
+                    jack_ph = jackknife_ci(v["strength"], v.get("phase_strengths", []))
+                    entry["strength_ci95"] = [min(prof[0], jack[0], jack_ph[0]), max(prof[1], jack[1], jack_ph[1])]
                     entry["strength_ci95_profile"] = prof
+                    entry["strength_ci95_condition_jackknife"] = jack
+                    entry["strength_ci95_phase_jackknife"] = jack_ph
                 entry["extrapolation_corner_rms"] = {"before": v["corner"][0], "after": v["corner"][1]}
             else:
                 entry["strength_ci95"] = None
@@ -304,7 +390,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
             if "+" in other or "+" in winner:
                 continue
             diff = _boot(cid, lambda r: float(np.mean(heldz[other][r] ** 2) - np.mean(heldz[winner][r] ** 2)),
-                         rng, 200)
+                         rng, 200, strata=sid)
             in_sample = abs(singles[other]["chi2"] - singles[winner]["chi2"]) / scale2 if other in singles \
                 and winner in singles else 0.0
             close_heldout = np.percentile(diff, 2.5) <= 0 or rms(heldz[other]) < EQUIVALENT_RATIO * rms(heldz[winner])
