@@ -246,15 +246,25 @@ def _pool_standard_errors(run: RunTrace) -> None:
             r.se = math.sqrt(var / r.n) if np.isfinite(var) else math.nan
 
 
-def load_gap_data(paths: Iterable[Path | str]) -> GapData:
-    """Read recordings (files, or directories searched for *.mcap)."""
+def _load_run_task(args: tuple[Path, int]) -> Any:
+    return load_run(*args)
+
+
+def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: Any = None) -> GapData:
+    """Read recordings (files, or directories searched for *.mcap); `jobs` local processes or a Dask `scheduler`
+    read them in parallel (analysis.parallel; jobs=1 reads in this process)."""
     files: list[Path] = []
     for p in paths:
         p = Path(p)
         files.extend(sorted(p.glob("*.mcap")) if p.is_dir() else [p])
     if not files:
         raise ConfigError("no recordings given (expected .mcap files or directories holding them)")
-    runs = [load_run(f, i) for i, f in enumerate(files)]
+    if jobs == 1 and scheduler is None:
+        runs = [load_run(f, i) for i, f in enumerate(files)]
+    else:
+        from analysis.parallel import parallel_map
+
+        runs = parallel_map(_load_run_task, [(f, i) for i, f in enumerate(files)], jobs=jobs, scheduler=scheduler)
     rows = [r for run in runs for r in run.rows]
     if not rows:
         raise RecordingError(f"{files[0]}: no driven or static steps to compare with the model")

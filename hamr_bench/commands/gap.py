@@ -1,4 +1,5 @@
-"""`hamr-bench gap RECORDINGS... [--params FIT.json] [--effects NAME,...] --json [--report DIR]`: where the
+"""`hamr-bench gap RECORDINGS... [--params FIT.json] [--effects NAME,...] [--jobs J] [--scheduler ADDRESS] --json
+[--report DIR]`: where the
 recordings part from the nominal model, which candidate effect explains it, and how far it closes the gap on
 held-out conditions (analysis/gap/)."""
 
@@ -17,6 +18,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the residual map, overlays and ranking")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+    parser.add_argument("--jobs", type=int, default=None,
+                        help="processes reading the recordings (default: one per core; 1: this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="read the recordings on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.set_defaults(func=run)
 
 
@@ -74,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     names = check_names(args.effects.split(",")) if args.effects else None
     params = load_params(args.params)
-    data = load_gap_data(args.recordings)
+    data = load_gap_data(args.recordings, jobs=args.jobs, scheduler=args.scheduler)
     result = diagnose(data, params, names, seed=args.seed)
     result["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
     if args.report:

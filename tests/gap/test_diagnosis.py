@@ -159,3 +159,28 @@ def test_blind_draw_covers_the_whole_library_and_the_backlash_span():
     assert b.min() >= lo and b.max() <= hi
     # log-uniform: about half the draws below the geometric middle
     assert 0.3 < np.mean(b < np.sqrt(lo * hi)) < 0.7
+
+
+def test_recordings_read_in_parallel_give_the_same_rows(recordings):
+    paths = [recordings["null"], recordings["base"]]
+    serial = load_gap_data(paths, jobs=1)
+    pooled = load_gap_data(paths, jobs=2)
+    assert [r.path for r in pooled.runs] == [r.path for r in serial.runs]
+    assert len(pooled.rows) == len(serial.rows) > 0
+    for a, b in zip(serial.rows, pooled.rows):
+        assert a.__dict__.keys() == b.__dict__.keys()
+        for key, value in a.__dict__.items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, b.__dict__[key])
+            else:
+                assert value == b.__dict__[key] or (value != value and b.__dict__[key] != b.__dict__[key]), key
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
+                                       host="127.0.0.1",
+                                       dashboard_address=None, silence_logs=40)
+    try:
+        with distributed.Client(cluster) as client:
+            on_dask = load_gap_data(paths, scheduler=client.scheduler.address)
+        assert len(on_dask.rows) == len(serial.rows)
+    finally:
+        cluster.close()
