@@ -15,8 +15,9 @@ import pytest
 
 from tests.reliability.harness import kill_and_recover, make_reference
 
-# Long enough (a few seconds of wall time) that a kill lands well after the first flush interval of data.
-SETTINGS = ["repetitions=1"]
+# Long enough (a few seconds of wall time) that a kill lands well after the first flush interval of data: the
+# simulated bench got faster, and one repetition (~0.6 s) let a kill at 40 % land before the first flush.
+SETTINGS = ["repetitions=12"]
 
 
 @pytest.mark.slow
