@@ -242,7 +242,8 @@ def format_comparison(result: dict[str, Any]) -> str:
               if v["exceeds_noise"]]
     if beyond:
         lines.append(f"beyond noise (RMS of (A-B)/noise > {result['exceed_factor']:g}, or a steady offset: "
-                     f"|mean z| > {result['offset_z']:g} and |mean| > noise and > {result['offset_fraction']:.0%} of span):")
+                     f"|mean z| > {result['offset_z']:g} and |mean| > noise and > "
+                     f"{result['offset_fraction']:.0%} of span):")
         for index, label, ch, v in beyond:
             why = "steady offset" if v["steady_offset"] else "RMS"
             lines.append(f"  step {index} ({label}) {ch}: mean {v['mean_diff']:.4g} (z {v['mean_z']:.3g}), "

@@ -91,10 +91,8 @@ class McapFileWriter:
         self._channels: list[bytes] = []
         self._chunk_indexes: list[bytes] = []
         self._metadata_indexes: list[bytes] = []
-        self._message_count = 0
         self._channel_counts: dict[int, int] = {}
-        self._start_ns = 0
-        self._end_ns = 0
+        self._chunk_spans: list[tuple[int, int]] = []  # (first, last log time) per chunk: the file's span
         self._metadata_count = 0
         self._finished = False
 
@@ -172,14 +170,6 @@ class McapFileWriter:
             chunk.start_ns = chunk.end_ns = log_time
         chunk.messages += 1
         self._channel_counts[channel_id] += 1
-        if self._message_count:
-            if log_time < self._start_ns:
-                self._start_ns = log_time
-            if log_time > self._end_ns:
-                self._end_ns = log_time
-        else:
-            self._start_ns = self._end_ns = log_time
-        self._message_count += 1
         if chunk.size > self._chunk_size:
             self.close_chunk()
 
@@ -204,6 +194,7 @@ class McapFileWriter:
             offsets.append(struct.pack("<HQ", channel_id, self._pos))
             self._write(_record(OP_MESSAGE_INDEX, struct.pack("<HI", channel_id, len(entries)) + entries))
         offsets_map = b"".join(offsets)
+        self._chunk_spans.append((chunk.start_ns, chunk.end_ns))
         self._chunk_indexes.append(_record(OP_CHUNK_INDEX, struct.pack(
             "<QQQQI", chunk.start_ns, chunk.end_ns, chunk_start, chunk_length, len(offsets_map)) + offsets_map
             + struct.pack("<Q", self._pos - index_start) + _string(chunk.compression)
@@ -234,9 +225,11 @@ class McapFileWriter:
         summary_start = self._pos
         groups: list[tuple[int, bytes]] = []
         counts = b"".join(struct.pack("<HQ", c, n) for c, n in self._channel_counts.items())
+        start_ns = min((a for a, _ in self._chunk_spans), default=0)
+        end_ns = max((b for _, b in self._chunk_spans), default=0)
         statistics = _record(OP_STATISTICS, struct.pack(
-            "<QHIIIIQQI", self._message_count, len(self._schemas), len(self._channels), 0, self._metadata_count,
-            len(self._chunk_indexes), self._start_ns, self._end_ns, len(counts)) + counts)
+            "<QHIIIIQQI", sum(self._channel_counts.values()), len(self._schemas), len(self._channels), 0,
+            self._metadata_count, len(self._chunk_indexes), start_ns, end_ns, len(counts)) + counts)
         for opcode, records in ((OP_SCHEMA, self._schemas), (OP_CHANNEL, self._channels),
                                 (OP_STATISTICS, [statistics]), (OP_CHUNK_INDEX, self._chunk_indexes),
                                 (OP_METADATA_INDEX, self._metadata_indexes)):
@@ -255,5 +248,4 @@ class McapFileWriter:
         self._out.write(bytes(summary))
         self._out.write(footer_head + struct.pack("<I", summary_crc))
         self._out.write(MAGIC)
-        self._pos += len(summary) + len(footer_head) + 4 + len(MAGIC)
         self._finished = True

@@ -1,7 +1,8 @@
 """The run recorder: one MCAP file per run, written by a single writer thread fed through a queue.
 
 Callers (the runner's acquisition loop, a camera thread, the importer) only encode and enqueue, which costs a
-microsecond or so per scalar sample; the writer thread owns the `McapFileWriter` (mcap_file.py; it has no locks) and the file.
+microsecond or so per scalar sample; the writer thread owns the `McapFileWriter` (mcap_file.py; it has no locks)
+and the file.
 
 Crash safety: the writer thread closes the open chunk, flushes and `os.fsync`s at least every `flush_interval_s`
 of wall time (not rig time: under the virtual clock an hour-long protocol runs in seconds, and durability is about
