@@ -26,8 +26,10 @@ A source without `home` / `tare` events (an imported trace) gets both at its sta
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -368,6 +370,12 @@ def model_overrides_from_fit(fit_path: Path | str, design: int | None, layers: i
 
 
 # ---------------------------------------------------------------------------------------------- running a replay
+def _sha256_of_file(path: Path) -> str:
+    """Hex SHA-256 of `path`, streamed (a camera run is hundreds of MB, no need to hold it in memory)."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
 def replay_recording(source_path: Path | str, out: Path | str, *, params_path: Path | str | None = None,
                      effects: dict[str, float] | None = None, seed: int | None = None,
                      rig_path: Path | str | None = None, overwrite: bool = False, quiet: bool = True,
@@ -376,17 +384,18 @@ def replay_recording(source_path: Path | str, out: Path | str, *, params_path: P
     (a simulated source) or to 0 / none; model parameters are the bench's nominal ones unless `params_path` names
     a fit's JSON. `serve_traffic` serves the serial devices from the source's recorded traffic instead of the
     emulators (driver-change testing). Returns (RunResult, ReplaySource)."""
-    import hashlib
-
     from hamr_bench.protocols.replay_plan import ReplayRequest, run_replay
 
-    source = read_replay_source(source_path)
+    # The digest is computed on a thread while the source is read: both stream the whole file (hundreds of MB for a
+    # camera run) and hashlib and file reads release the GIL, so on two cores the hash costs no wall time.
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        digest_future = pool.submit(_sha256_of_file, Path(source_path))
+        source = read_replay_source(source_path)
+        digest = digest_future.result()
     overrides = model_overrides_from_fit(params_path, source.design, source.layers, source.fixture) \
         if params_path else {}
     use_seed = seed if seed is not None else (source.seed if source.seed is not None else 0)
     use_effects = dict(effects) if effects is not None else (dict(source.effects) if source.kind == "sim" else {})
-    with open(source_path, "rb") as f:  # streamed: a camera run is hundreds of MB, no need to hold it in memory
-        digest = hashlib.file_digest(f, "sha256").hexdigest()
     replay_md = {
         "source": str(Path(source_path).resolve()), "source_sha256": digest, "source_kind": source.kind,
         "source_exit_status": source.exit_status, "source_reason": source.exit_reason,

@@ -16,8 +16,9 @@ Background noise: a full frame of exact draws costs more than the rest of a fram
 pool of `BACKGROUND_POOL_FRAMES` frames' worth of background pixels (from `background_dn_table`, the exact
 distribution) once per exposure setting, and each frame's background is a window into it at a random offset. Every
 pixel's distribution is exact and pixels within a frame are independent; two frames share values only as a copy
-shifted by the difference of their offsets. The patch around the marker (out to 7 sigma of the spot) is drawn
-afresh for every frame with `digitise`, so what tracking sees is unaffected.
+shifted by the difference of their offsets. The patch around the marker (out to `spot_reach_px`, where the spot
+adds less than a thousandth of an electron to a pixel) is drawn afresh for every frame with `digitise`, so what
+tracking sees is unaffected.
 
 Timing on the bench's clock: frame k is exposed over [k / fps, k / fps + exposure]; `read()` returns the next
 frame and, if its exposure has not ended, waits (through the clock) until it has. A reader that falls more
@@ -40,7 +41,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.special import ndtr
+from scipy.special import ndtr, ndtri
 
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError
@@ -155,12 +156,27 @@ def draw_background(table: np.ndarray, n_pixels: int, rng: np.random.Generator) 
     return np.take(table, rng.integers(0, 2**_LUT_BITS, size=n_pixels, dtype=np.uint16))
 
 
+# Beyond the patch drawn with `digitise`, the spot may add at most this many electrons to a pixel: a thousandth of
+# an electron is 1e-4 of a grey level at the default gain, against a background noise of ~13 electrons.
+SPOT_TAIL_E = 1e-3
+
+
+def spot_reach_px(spec: SimCameraSpec, exposure_s: float) -> int:
+    """Half-width of the patch around the spot's path, in pixels: a pixel outside it has its near edge at least
+    `reach - 1` from every motion sample, so it holds at most the 1-D tail fraction Q((reach - 1) / sigma) of the
+    spot's electrons; the reach makes that at most `SPOT_TAIL_E`."""
+    total_e = spec.spot_e_per_s * exposure_s
+    if total_e <= SPOT_TAIL_E:
+        return 1
+    return int(math.ceil(-ndtri(SPOT_TAIL_E / total_e) * spec.spot_sigma_px)) + 1
+
+
 def render_frame(spec: SimCameraSpec, positions_px: np.ndarray, exposure_s: float, shape: tuple[int, int],
                  rng: np.random.Generator, table: np.ndarray | None = None,
                  background_pool: np.ndarray | None = None) -> np.ndarray:
     """A noisy frame: background pixels from `background_dn_table` (fresh draws, or a window at a random offset
-    into `background_pool`, see the module docstring), and the patch where the spot (over its motion path, out to 7
-    sigma, where it adds < 1e-10 of its electrons per pixel) is drawn with `digitise`."""
+    into `background_pool`, see the module docstring), and the patch where the spot (over its motion path, out to
+    `spot_reach_px`, beyond which it adds < `SPOT_TAIL_E` electrons to a pixel) is drawn with `digitise`."""
     height, width = shape
     n = height * width
     if background_pool is not None and background_pool.size >= n:
@@ -171,7 +187,7 @@ def render_frame(spec: SimCameraSpec, positions_px: np.ndarray, exposure_s: floa
             table = background_dn_table(spec, spec.background_e_per_pixel_per_s * exposure_s)
         image = draw_background(table, n, rng).reshape(shape)
     pos = np.atleast_2d(np.asarray(positions_px, dtype=float))
-    reach = int(math.ceil(7 * spec.spot_sigma_px)) + 1
+    reach = spot_reach_px(spec, exposure_s)
     x0 = max(int(math.floor(pos[:, 0].min())) - reach, 0)
     x1 = min(int(math.ceil(pos[:, 0].max())) + reach + 1, width)
     y0 = max(int(math.floor(pos[:, 1].min())) - reach, 0)

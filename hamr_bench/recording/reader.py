@@ -30,7 +30,7 @@ from hamr_bench.recording.scan import (
     scan,
 )
 
-_LAZY_SCHEMAS = {schemas.IMAGE_SCHEMA, "foxglove.RawImage"}
+_LAZY_SCHEMAS = set(schemas.IMAGE_SCHEMAS)
 
 
 class RecordingWarning(UserWarning):
@@ -64,14 +64,23 @@ class Event:
 
 @dataclass(frozen=True)
 class Image:
+    """One camera frame: `format` is "raw" (a `foxglove.RawImage`: `width`, `height`, `encoding`, `step` say how
+    to read `data`) or the `foxglove.CompressedImage` format ("png", "jpeg")."""
+
     time_s: float
     format: str
     frame_id: str
     data: bytes
+    width: int = 0
+    height: int = 0
+    encoding: str = ""
+    step: int = 0
 
     def pixels(self) -> np.ndarray:
-        from hamr_bench.recording.images import decode_image
+        from hamr_bench.recording.images import decode_image, decode_raw_image
 
+        if self.format == "raw":
+            return decode_raw_image(self.data, self.width, self.height, self.encoding, self.step)
         return decode_image(self.data)
 
 
@@ -235,10 +244,13 @@ class RecordingReader:
     def images(self, topic: str = "/camera/image") -> Iterator[Image]:
         """Frames in file order, read from disk chunk by chunk."""
         channel = self._channel(topic)
-        if self._schema_name(channel.id) != schemas.IMAGE_SCHEMA:
+        schema_name = self._schema_name(channel.id)
+        if schema_name not in schemas.IMAGE_SCHEMAS:
             raise RecordingError(
-                f"{self.path}: topic {topic} is not a {schemas.IMAGE_SCHEMA} stream ({self._schema_name(channel.id)})"
+                f"{self.path}: topic {topic} is not an image stream ({' or '.join(schemas.IMAGE_SCHEMAS)}) but "
+                f"{schema_name}"
             )
+        raw = schema_name == schemas.RAW_IMAGE_SCHEMA
         cls = self._message_class(topic)
         stream = self._streams.get(channel.id)
         if stream is None:
@@ -249,7 +261,11 @@ class RecordingReader:
                     continue
                 msg = self._parse(cls, record.data, topic)
                 stamp_ns = msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos
-                yield Image(self._to_time_s(stamp_ns), msg.format, msg.frame_id, bytes(msg.data))
+                if raw:
+                    yield Image(self._to_time_s(stamp_ns), "raw", msg.frame_id, bytes(msg.data), msg.width,
+                                msg.height, msg.encoding, msg.step)
+                else:
+                    yield Image(self._to_time_s(stamp_ns), msg.format, msg.frame_id, bytes(msg.data))
 
     # ------------------------------------------------------------------ helpers
 

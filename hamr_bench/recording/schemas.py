@@ -24,6 +24,8 @@ from hamr_bench.errors import RecordingError
 
 PACKAGE = "hamr_bench"
 IMAGE_SCHEMA = "foxglove.CompressedImage"
+RAW_IMAGE_SCHEMA = "foxglove.RawImage"
+IMAGE_SCHEMAS = (RAW_IMAGE_SCHEMA, IMAGE_SCHEMA)
 EVENT_SCHEMA = f"{PACKAGE}.Event"
 TRAFFIC_SCHEMA = f"{PACKAGE}.SerialTraffic"
 EVENTS_TOPIC = "/events"
@@ -185,6 +187,14 @@ def image_descriptor_set() -> bytes:
     from mcap_protobuf.schema import build_file_descriptor_set
 
     return build_file_descriptor_set(CompressedImage).SerializeToString()
+
+
+@lru_cache(maxsize=None)
+def raw_image_descriptor_set() -> bytes:
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+    from mcap_protobuf.schema import build_file_descriptor_set
+
+    return build_file_descriptor_set(RawImage).SerializeToString()
 
 
 @lru_cache(maxsize=64)

@@ -46,7 +46,7 @@ import numpy as np
 
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
-from hamr_bench.recording.images import encode_image
+from hamr_bench.recording.images import encode_image, raw_image_fields
 from hamr_bench.recording.mcap_file import McapFileWriter
 
 EXIT_STATUSES = ("success", "aborted", "failed")
@@ -85,6 +85,7 @@ class _Channel:
     schema: schemas.ScalarSchema | None
     is_image: bool = False
     pack: Any = None  # scalar channels: (time_s, fields) -> payload bytes
+    schema_name: str = ""
 
 
 def _one_line(exc: BaseException) -> str:
@@ -243,36 +244,48 @@ class Recorder:
         topic: str,
         time_s: float,
         image: np.ndarray | bytes,
-        format: str = "png",  # noqa: A002 - the field is called `format` in foxglove.CompressedImage
+        format: str = "raw",  # noqa: A002 - the field is called `format` in foxglove.CompressedImage
         frame_id: str = "camera",
     ) -> None:
-        """A camera frame as `foxglove.CompressedImage`. Arrays are encoded here (PNG lossless, or JPEG);
-        bytes are taken as already encoded in `format`."""
-        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
-
+        """A camera frame. `format="raw"` (default): the array as `foxglove.RawImage` (mono8/mono16/bgr8/bgr16),
+        no encoding cost. `"png"` (lossless) or `"jpeg"`: as `foxglove.CompressedImage`, arrays encoded here,
+        bytes taken as already encoded. A topic carries one of the two schemas."""
         schemas.check_topic(topic)
+        raw = format == "raw"
+        schema_name = schemas.RAW_IMAGE_SCHEMA if raw else schemas.IMAGE_SCHEMA
         channel = self._channels.get(topic) or self._register_special(
-            topic, schemas.IMAGE_SCHEMA, schemas.image_descriptor_set(), is_image=True
+            topic, schema_name, schemas.raw_image_descriptor_set() if raw else schemas.image_descriptor_set(),
+            is_image=True,
         )
         if not channel.is_image:
             raise RecordingError(f"topic {topic} already carries another message type, not images")
-        if isinstance(image, np.ndarray):
-            data = encode_image(image, format)
-        elif isinstance(image, (bytes, bytearray, memoryview)):
-            data = bytes(image)
-        else:
-            raise RecordingError(f"topic {topic}: image must be a numpy array or bytes, not {type(image).__name__}")
+        if channel.schema_name != schema_name:
+            raise RecordingError(f"topic {topic} carries {channel.schema_name}; format={format!r} would need "
+                                 f"{schema_name} (one schema per topic)")
         try:
             finite = math.isfinite(time_s)
         except TypeError:
             finite = False
         if not finite:
             raise RecordingError(f"topic {topic}: image time_s={time_s!r} is not a finite time")
-        image_format = "jpeg" if format == "jpg" else format
         timestamp_ns = self.start_time_ns + round(time_s * 1e9)
+        if raw:
+            if not isinstance(image, np.ndarray):
+                raise RecordingError(f"topic {topic}: format='raw' needs a numpy array, not {type(image).__name__}")
+            self._put(channel, time_s, raw_image_payload(timestamp_ns, frame_id, *raw_image_fields(image)))
+            return
+        if isinstance(image, np.ndarray):
+            data = encode_image(image, format)
+        elif isinstance(image, (bytes, bytearray, memoryview)):
+            data = bytes(image)
+        else:
+            raise RecordingError(f"topic {topic}: image must be a numpy array or bytes, not {type(image).__name__}")
+        image_format = "jpeg" if format == "jpg" else format
         try:
             payload = compressed_image_payload(timestamp_ns, frame_id, image_format, data)
         except (TypeError, ValueError, OverflowError):  # odd inputs: let protobuf encode (or refuse) them
+            from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
             msg = CompressedImage(frame_id=frame_id, format=image_format, data=data)
             msg.timestamp.FromNanoseconds(timestamp_ns)
             payload = msg.SerializeToString()
@@ -426,7 +439,8 @@ class Recorder:
             if scalar is None and topic in schemas.KNOWN_SCALAR_TOPICS:
                 raise RecordingError(f"topic {topic} is a scalar topic; write it with write_scalar")
             channel = _Channel(
-                len(self._channels), topic, scalar, is_image, scalar.packer() if scalar is not None else None
+                len(self._channels), topic, scalar, is_image, scalar.packer() if scalar is not None else None,
+                schema_name,
             )
             # Put under the lock so the registration reaches the writer before any sample of this channel.
             self._queue.put((_OP_REGISTER, None, (topic, schema_name, descriptor_set, is_image)))
@@ -653,6 +667,32 @@ def compressed_image_payload(timestamp_ns: int, frame_id: str, image_format: str
         value = values[name]
         if value or name == "timestamp":  # a timestamp that was set is written even when it is zero
             parts += [tag, _varint(len(value)), value]
+    return b"".join(parts)
+
+
+def raw_image_payload(timestamp_ns: int, frame_id: str, width: int, height: int, encoding: str, step: int,
+                      data: bytes) -> bytes:
+    """The bytes `foxglove.RawImage(timestamp, frame_id, width, height, encoding, step, data).SerializeToString()`
+    gives, with one copy of `data` (as `compressed_image_payload`; checked against protobuf in the tests). Fields
+    in number order: timestamp 1, width 2, height 3 (fixed32), encoding 4, step 5 (fixed32), data 6, frame_id 7."""
+    seconds, nanos = divmod(int(timestamp_ns), 1_000_000_000)
+    if not -(1 << 63) <= seconds < (1 << 63):
+        raise OverflowError(f"timestamp {timestamp_ns} ns out of range")
+    stamp = (b"\x08" + _varint(seconds) if seconds else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+    name = encoding.encode("utf-8")
+    frame = frame_id.encode("utf-8")
+    parts = [b"\x0a", _varint(len(stamp)), stamp]
+    for tag, value in ((b"\x15", width), (b"\x1d", height)):
+        if value:
+            parts += [tag, struct.pack("<I", value)]
+    if name:
+        parts += [b"\x22", _varint(len(name)), name]
+    if step:
+        parts += [b"\x2d", struct.pack("<I", step)]
+    if data:
+        parts += [b"\x32", _varint(len(data)), data]
+    if frame:
+        parts += [b"\x3a", _varint(len(frame)), frame]
     return b"".join(parts)
 
 

@@ -49,6 +49,23 @@ def test_tracks_across_frames_and_reacquires_a_jump() -> None:
     assert np.max(np.abs([[f.x_px - x, f.y_px - y] for f, (x, y) in zip(fixes, path)])) < 0.15
 
 
+def test_fast_ramp_is_tracked_without_a_full_frame_search(monkeypatch) -> None:
+    # A leg on a drive ramp: still, then 4 px/frame growing to 25 px/frame (more than the 8 px window
+    # half-width), steady, then still again. The fixes must follow it, and only the first frame may search
+    # the whole image: the rest come from the predicted or last position, or the search near the last fix.
+    rng = np.random.default_rng(3)
+    tracker = MarkerTracker(2.0)
+    steps = [0.0] * 3 + [4.0, 12.0, 25.0, 25.0, 25.0, 25.0, 18.0, 6.0] + [0.0] * 3
+    ys = 20.0 + np.cumsum(steps)
+    full_frame_searches = []
+    monkeypatch.setattr(tracker, "locate", lambda image, guess=None: full_frame_searches.append(1)
+                        or MarkerTracker.locate(tracker, image, guess))
+    fixes = [tracker.update(render(40.3, y, rng, (220, 80))) for y in ys]
+    assert all(f.ok for f in fixes)
+    assert np.max(np.abs([f.y_px - y for f, y in zip(fixes, ys)])) < 0.15
+    assert len(full_frame_searches) == 1
+
+
 def test_no_marker_is_not_ok_and_roi_offset_is_added() -> None:
     rng = np.random.default_rng(2)
     blank = render_frame(SimCameraSpec(spot_e_per_s=0.0), np.array([[10.0, 10.0]]), 2e-3, (40, 40), rng)

@@ -134,7 +134,7 @@ class FakeRecorder:
     def write_event(self, time_s, kind, step, message="", **data):
         self.events.append((time_s, kind, step, message, data))
 
-    def write_image(self, topic, time_s, image, format="png"):
+    def write_image(self, topic, time_s, image, format="raw"):
         self.images.append((topic, time_s))
 
     def add_metadata(self, name, values):

@@ -50,7 +50,9 @@ def full_recording(tmp_path):
         rec.write_scalar("/custom/temperature", 0.5, temperature_K=296.15, humidity=0.4)
         for k, frame in enumerate(frames):
             rec.write_image("/camera/image", 0.01 * k, frame)
+            rec.write_image("/camera/png", 0.01 * k, frame, format="png")
         rec.write_image("/camera/image", 0.05, _frame(9, np.uint16))
+        rec.write_image("/camera/colour", 0.05, np.stack([_frame(k) for k in (4, 5, 6)], axis=-1))
         rec.write_image("/camera/jpeg", 0.06, jpeg_source, format="jpeg")
         rec.write_image("/camera/raw_bytes", 0.07, b"\x89PNG-not-really", format="png", frame_id="cam2")
         rec.write_event(
@@ -86,9 +88,17 @@ def test_scalars_events_images_traffic_metadata_round_trip(full_recording):
     images = list(r.images("/camera/image"))
     assert [im.time_s for im in images] == [0.0, 0.01, 0.02, 0.05]
     for image, frame in zip(images, full_recording["frames"]):
-        assert image.format == "png" and image.frame_id == "camera"
-        np.testing.assert_array_equal(image.pixels(), frame)  # lossless
+        assert image.format == "raw" and image.encoding == "mono8" and image.frame_id == "camera"
+        np.testing.assert_array_equal(image.pixels(), frame)
+    assert images[3].encoding == "mono16"
     np.testing.assert_array_equal(images[3].pixels(), _frame(9, np.uint16))
+    (colour,) = r.images("/camera/colour")
+    assert colour.encoding == "bgr8"
+    np.testing.assert_array_equal(colour.pixels(), np.stack([_frame(k) for k in (4, 5, 6)], axis=-1))
+    pngs = list(r.images("/camera/png"))
+    for image, frame in zip(pngs, full_recording["frames"], strict=True):
+        assert image.format == "png"
+        np.testing.assert_array_equal(image.pixels(), frame)  # lossless
     (jpeg,) = r.images("/camera/jpeg")
     assert jpeg.format == "jpeg"
     assert np.abs(jpeg.pixels().astype(int) - full_recording["jpeg_source"]).max() <= 8  # lossy, but close
@@ -122,11 +132,16 @@ def test_reference_reader_decodes_every_message_with_log_time_equal_start_plus_t
         for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             assert channel.message_encoding == "protobuf" and schema.encoding == "protobuf"
-            if schema.name == "foxglove.CompressedImage":
+            if schema.name in ("foxglove.CompressedImage", "foxglove.RawImage"):
                 stamp = decoded.timestamp.seconds * 10**9 + decoded.timestamp.nanos
                 assert stamp == message.log_time
             else:
                 assert message.log_time == START_NS + round(decoded.time_s * 1e9)
+            if channel.topic == "/camera/image" and counts[channel.topic] <= 3:
+                assert schema.name == "foxglove.RawImage" and decoded.encoding == "mono8"
+                frame = full_recording["frames"][counts[channel.topic] - 1]
+                assert (decoded.width, decoded.height, decoded.step) == (64, 48, 64)
+                assert decoded.data == frame.tobytes()
             if channel.topic == "/force":
                 assert schema.name == "hamr_bench.Force"
                 i = counts["/force"] - 1
@@ -229,6 +244,10 @@ def test_block_mode_waits_for_room_instead_of_dropping(tmp_path):
         (lambda r: r.write_bytes("/traffic/stage", 0.0, "both", b""), "direction"),
         (lambda r: r.write_bytes("/stage", 0.0, "tx", b""), "must start with /traffic/"),
         (lambda r: r.write_image("/camera/image", 0.0, np.zeros((4, 4), np.float32)), "dtype"),
+        (lambda r: r.write_image("/camera/image", 0.0, np.zeros((4, 4, 2), np.uint8)), "shape"),
+        (lambda r: r.write_image("/camera/image", 0.0, b"\x89PNG"), "needs a numpy array"),
+        (lambda r: (r.write_image("/cam", 0.0, np.zeros((4, 4), np.uint8)),
+                    r.write_image("/cam", 0.1, np.zeros((4, 4), np.uint8), format="png")), "one schema per topic"),
         (lambda r: r.write_event(0.0, "x", 1, bad=object()), "not JSON serialisable"),
     ],
 )

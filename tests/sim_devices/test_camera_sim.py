@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from hamr_bench.clock import VirtualClock
+from sim_devices import camera_sim
 from sim_devices.camera_sim import (
     SimCamera,
     SimCameraSpec,
@@ -17,6 +18,7 @@ from sim_devices.camera_sim import (
     digitise,
     expected_electrons,
     render_frame,
+    spot_reach_px,
 )
 
 
@@ -110,7 +112,10 @@ def test_marker_motion_blurs_along_its_path() -> None:
     _, img = c.read()  # moves 20 px during the exposure, from x = 100 to 120
     row = img[100].astype(float)
     assert row[105:116].min() > 0.3 * row.max()
-    assert row[90] < 0.1 * row.max() and row[130] < 0.1 * row.max()  # background only
+    # 10 px (5 sigma) beyond either end only background: 1e4 e/s x 5 ms = 50 e, noise sqrt(50 + 25 + 8.3) e,
+    # x 0.1 DN/e: 5 +- 0.9 DN; 6 noise sigmas above it is still far below the streak's ~55 DN
+    background_DN, noise_DN = 5.0, 0.1 * np.sqrt(50 + 25 + 1 / (12 * 0.1**2))
+    assert row[90] < background_DN + 6 * noise_DN and row[130] < background_DN + 6 * noise_DN
 
 
 def test_faults_and_determinism() -> None:
@@ -137,3 +142,17 @@ def test_scheduled_disconnect() -> None:
     assert c.read()[0] and c.isOpened()
     clock.advance_to(0.06)
     assert c.read() == (False, None) and not c.isOpened()
+
+
+@pytest.mark.parametrize("exposure_s", [2e-3, 1 / 60])
+def test_spot_outside_its_patch_adds_under_the_tail_tolerance(exposure_s) -> None:
+    # The exact expected image of a spot moving 10 px during the exposure, on a patch much larger than the one
+    # render_frame draws: every pixel outside the drawn patch (reach beyond the path's pixel bounds) must get
+    # less than SPOT_TAIL_E electrons from the spot.
+    spec = SimCameraSpec()
+    path = np.column_stack([np.linspace(50.3, 60.3, spec.motion_samples), np.full(spec.motion_samples, 50.7)])
+    reach = spot_reach_px(spec, exposure_s)
+    spot_e = expected_electrons(spec, path, exposure_s, (101, 111)) - spec.background_e_per_pixel_per_s * exposure_s
+    inside = np.zeros(spot_e.shape, dtype=bool)
+    inside[50 - reach:51 + reach + 1, 50 - reach:61 + reach + 1] = True  # floor(min) - reach .. ceil(max) + reach
+    assert spot_e[~inside].max() < camera_sim.SPOT_TAIL_E
