@@ -8,7 +8,8 @@ cycles. What "the value" is, per protocol, is documented in `analysis/observatio
   `drive.settle_s` of each plateau); force = mean /force over the high plateau (the sensor was tared with nothing
   touching, so this is absolute); stroke = mean /camera/displacement over the high plateau minus over the
   preceding low plateau (peak-to-peak, taken as a magnitude: the camera's sign convention is not used);
-- static steps: mean /force over the step's hold (`hold_s` after the step event);
+- static steps: mean /force over the step's hold (`hold_s` after the step event); the actuator protocol's
+  undriven stiffness steps (mode 'stiffness', sag_m = push past contact) the same, with `stiffness.hold_s`;
 - imported point tables: the `measurement` event of each step carries the value itself (one "cycle").
 
 The force the contact search left on the sensor (`preload_N`: mean force over the last 0.1 s before
@@ -63,7 +64,7 @@ class Observation:
     fixture: str
     design: int | None
     layers: int
-    mode: str                    # 'blocked' | 'free' for the actuator protocol, '' otherwise
+    mode: str                    # 'blocked' | 'free' | 'stiffness' for the actuator protocol, '' otherwise
     quantity: str                # 'force_N' | 'displacement_m'
     voltage_V: float
     sag_m: float
@@ -288,6 +289,8 @@ def load_run(path: Path | str, index: int = 0) -> Run:
     drive_p = info.protocol_params.get("drive", {}) if isinstance(info.protocol_params, dict) else {}
     settle_s = drive_p.get("settle_s")
     hold_s = info.protocol_params.get("hold_s") if isinstance(info.protocol_params, dict) else None
+    stiffness_p = info.protocol_params.get("stiffness", {}) if isinstance(info.protocol_params, dict) else {}
+    stiffness_hold_s = stiffness_p.get("hold_s") if isinstance(stiffness_p, dict) else None
 
     steps = [i for i, e in enumerate(events) if e.kind == "step"]
     end_time = events[-1].time_s + 1.0 if events else math.inf
@@ -340,9 +343,11 @@ def load_run(path: Path | str, index: int = 0) -> Run:
                         run.observations.append(Observation(quantity="force_N", value=mean, spread=spread,
                                                             n_cycles=k, **base))
         elif tf.size:
-            # Undriven (static) step: the force over the hold that follows the step event.
-            if hold_s is not None:
-                a, b = ev.time_s, min(ev.time_s + float(hold_s), nxt)
+            # Undriven step (static leg, or the actuator's stiffness sweep): the force over the hold that follows
+            # the step event.
+            h = stiffness_hold_s if mode == "stiffness" else hold_s
+            if h is not None:
+                a, b = ev.time_s, min(ev.time_s + float(h), nxt)
             else:   # no hold time recorded (imported trace): the second half of the plateau, after settling
                 end = min(nxt, float(tf[-1]))
                 a, b = ev.time_s + DEFAULT_SETTLE_FRACTION * (end - ev.time_s), end

@@ -6,7 +6,8 @@ stroke is compared with a predicted peak-to-peak stroke. Where a design or actua
 model with the parameters the recording names, drawn dashed and labelled so.
 
 - fig7_actuator.png: blocked force, free displacement (one-sided = stroke / 2), energy F_b delta and energy density
-  vs bias voltage, per layer count;
+  vs bias voltage, per layer count; with the protocol's stiffness sweep in the data, a fifth panel: undriven tip
+  force vs push past contact, loading and unloading (a gap between them is the stage's reversal error x k_act);
 - fig8_blocked_force.png: leg force at zero sag vs voltage (a) and at 250 V vs sag (b), per design, with the 5.3 mN
   line the paper uses;
 - fig9_free_displacement.png: leg stroke vs voltage per design;
@@ -96,8 +97,15 @@ def fig7_actuator(dataset: Dataset, fit: FitReport, path: Path) -> Path | None:
     if not obs:
         return None
     plt = _plt()
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
-    ax_f, ax_d, ax_e, ax_ed = axes.ravel()
+    sweep = any(o.mode == "stiffness" for o in obs)
+    if sweep:   # a fifth panel for the undriven stiffness sweep
+        fig, grid = plt.subplots(2, 3, figsize=(15, 7.5))
+        ax_f, ax_d, ax_k, ax_e, ax_ed, spare = grid.ravel()
+        spare.set_visible(False)
+        axes = np.array([ax_f, ax_d, ax_k, ax_e, ax_ed])
+    else:
+        fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
+        ax_f, ax_d, ax_e, ax_ed = axes.ravel()
     for layers in sorted({o.layers for o in obs}):
         mine = [o for o in obs if o.layers == layers]
         color = COLORS[layers]
@@ -126,10 +134,25 @@ def fig7_actuator(dataset: Dataset, fit: FitReport, path: Path) -> Path | None:
             df = np.array([mf[xf == v][0] for v in common]) / 2
             ax_e.plot(common, fb * df * 1e6, "o", color=color, label=f"{label} data")
             ax_ed.plot(common, fb * df / act.mass_kg(a), "o", color=color, label=f"{label} data")
+        stiff = [o for o in mine if o.mode == "stiffness"]
+        if stiff:
+            # the same per-run tip-zero offset as the blocked rows (the sweep pushes from the same contact)
+            for direction, face in (("up", color), ("down", "none")):
+                rows = [o for o in stiff if o.direction == direction]
+                if rows:
+                    x, m, _ = _points(rows, "sag_m")
+                    ax_k.plot(x * 1e6, (m - pre) * 1e3, "o", color=color, markerfacecolor=face,
+                              label=f"{label} {'loading' if direction == 'up' else 'unloading'}")
+            pp = np.linspace(0, max(o.sag_m for o in stiff), 20)
+            ax_k.plot(pp * 1e6, act.stiffness_N_per_m(a) * pp * 1e3, style, color=color,
+                      label=f"{label} model k = {act.stiffness_N_per_m(a):.0f} N/m")
         ax_e.plot(vv, act.energy_J(a, vv) * 1e6, style, color=color, label=f"{label} model")
         ax_ed.plot(vv, act.energy_density_J_per_kg(a, vv), style, color=color, label=f"{label} model")
     ax_f.set(xlabel="bias voltage (V)", ylabel="blocked force (mN)", title="(a) blocked force")
     ax_d.set(xlabel="bias voltage (V)", ylabel="free displacement, one-sided (um)", title="(b) free displacement")
+    if sweep:
+        ax_k.set(xlabel="push past contact (um)", ylabel="tip force, undriven (mN)",
+                 title="(e) stiffness sweep (filled: loading, open: unloading)")
     ax_e.set(xlabel="bias voltage (V)", ylabel="energy F_b x delta (uJ)", title="(c) energy")
     ax_ed.set(xlabel="bias voltage (V)", ylabel="energy density (J/kg)", title="(d) energy density (model mass)")
     for ax in axes.ravel():

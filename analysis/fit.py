@@ -269,15 +269,18 @@ def fit_actuator(dataset: Dataset, layers: int, method: str = "least-squares", i
     reference = np.array([getattr(reported, ACTUATOR_FIELDS[s.name]) for s in ACTUATOR_SPECS])
     mode = np.array([o.mode for o in obs])
     volts = np.array([o.voltage_V for o in obs])
+    push = np.array([o.sag_m for o in obs])
     y = np.array([o.value for o in obs])
-    nuisance = make_nuisance(obs, lambda o: o.mode == "blocked", "f0", "N", ACTUATOR_OFFSET_SIGMA_N, 0.05)
+    # the stiffness sweep pushes from the same contact as the blocked steps: one tip-zero offset for both
+    nuisance = make_nuisance(obs, lambda o: o.mode in ("blocked", "stiffness"), "f0", "N", ACTUATOR_OFFSET_SIGMA_N,
+                             0.05)
 
     def model(p: np.ndarray) -> ActuatorParams:
         return actuator_with(base, dict(zip(ACTUATOR_FIELDS, p)))
 
     def predict(p: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
         try:
-            return actuator_prediction(model(p), mode, volts, offsets)
+            return actuator_prediction(model(p), mode, volts, offsets, push)
         except HamrBenchError:
             return None
 
@@ -318,7 +321,9 @@ def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams
                       level: float = 0.95) -> dict[str, dict[str, Any]]:
     """What the actuator data DO identify: blocked force per volt c and free deflection per volt s (hence stiffness
     c/s and energy c s V^2), each from its own rows. Both observations are linear in them (F = c V + f0_run,
-    stroke = 2 s V), so the 95 % intervals are exact weighted-regression intervals (Student t)."""
+    stroke = 2 s V), so the 95 % intervals are exact weighted-regression intervals (Student t). With the undriven
+    stiffness sweep in the data, the tip stiffness is also measured directly (`stiffness_direct`, F = k push +
+    f0_run), to compare with c/s."""
     from scipy import stats
 
     from hamr_bench.model import actuator as act
@@ -326,12 +331,24 @@ def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams
     v = np.array([o.voltage_V for o in obs])
     y = np.array([o.value for o in obs])
     runs = np.array([o.run for o in obs])
-    blocked = np.array([o.mode == "blocked" for o in obs])
+    mode = np.array([o.mode for o in obs])
+    blocked, free, stiff = mode == "blocked", mode == "free", mode == "stiffness"
+    push = np.array([o.sag_m for o in obs])
     out: dict[str, dict[str, Any]] = {}
     est = {}
-    for name, m, xx, grp in (("force_per_volt", blocked, v, runs), ("displacement_per_volt", ~blocked, 2 * v, None)):
+    for name, m, xx, grp in (("force_per_volt", blocked, v, runs), ("displacement_per_volt", free, 2 * v, None)):
         if m.sum() >= 3:
             est[name] = _slope_ci(xx[m], y[m], sig[m], None if grp is None else grp[m])
+    # the undriven stiffness sweep measures the tip stiffness directly (slope of force on push, one intercept per
+    # run: the contact offset); loading and unloading rows both count (a stage's reversal error shifts the
+    # unloading branch by k x play but leaves the slope, as long as the tip stays in contact)
+    touching = stiff & (y > 3 * sig)   # out of contact (a play larger than the push) reads 0 + noise
+    if touching.sum() >= 3 and np.unique(push[touching]).size >= 2:
+        k, sk, dk = _slope_ci(push[touching], y[touching], sig[touching], runs[touching])
+        if dk > 0 and np.isfinite(sk):
+            t = stats.t.ppf(0.5 + 0.5 * level, dk)
+            out["stiffness_direct"] = {"value": k, "ci95": [k - t * sk, k + t * sk], "unit": "N/m",
+                                       "note": "slope of the undriven stiffness sweep (force on push past contact)"}
     v_max = float(v.max())
 
     def entry(value: float, rel_sd: float, dof: int, unit: str) -> dict[str, Any]:

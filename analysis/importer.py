@@ -166,7 +166,11 @@ def import_points(csv_path: Path, out_path: Path, overwrite: bool = False) -> in
         rec.write_event(0.0, "run_start", 0, f"imported from {csv_path.name}")
         for r in rows:
             modes = []
-            if r.protocol == "actuator":
+            if r.protocol == "actuator" and r.voltage_V == 0 and r.sag_m > 0:
+                # undriven, pushed past contact: a stiffness-sweep row (its force; a camera reading is not used)
+                if r.force_N is not None:
+                    modes.append(("stiffness", r.force_N, None))
+            elif r.protocol == "actuator":
                 if r.force_N is not None:
                     modes.append(("blocked", r.force_N, None))
                 if r.displacement_m is not None:

@@ -7,6 +7,7 @@ different. Exactly:
 |---|---|---|
 | actuator, blocked, force_N | mean force over each high dwell (V_bias = V_drive = V) | F_b(V) + f0_run |
 | actuator, free, displacement_m | tip stroke high dwell - low dwell (V_drive V vs 0, bias V) | 2 delta(V) (peak-to-peak) |
+| actuator, stiffness, force_N | mean force over the hold, undriven, stage pushed sag_m past contact | max(0, k_act sag + f0_run) |
 | blocked-force / sag-sweep, force_N | mean force over each high dwell | max(0, foot_force_N(V, V, sag + h0_run)) |
 | free-displacement, displacement_m | foot stroke high dwell - low dwell | free_foot_height(V, 0) - free_foot_height(V, V) |
 | static, force_N | mean force over the hold, undriven | max(0, foot_force_N(0, 0, sag + h0_run)) |
@@ -34,15 +35,23 @@ from hamr_bench.model import ActuatorParams, DesignParams, Powertrain
 from hamr_bench.model import actuator as act
 
 
-def actuator_prediction(a: ActuatorParams, mode: np.ndarray, voltage_V: np.ndarray, offset_N: np.ndarray) -> np.ndarray:
-    """Predicted actuator-protocol observation per row (force for 'blocked', stroke for 'free'); `offset_N` is the
-    run's f0 (force at the tip's zero) per row."""
+def actuator_prediction(a: ActuatorParams, mode: np.ndarray, voltage_V: np.ndarray, offset_N: np.ndarray,
+                        push_m: np.ndarray | None = None) -> np.ndarray:
+    """Predicted actuator-protocol observation per row (force for 'blocked', stroke for 'free', undriven force for
+    'stiffness' at `push_m` past contact: k_act = c / s, the tip's stiffness); `offset_N` is the run's f0 (force
+    at the tip's zero) per row. Any other mode is nan (never silently taken for 'free')."""
     c = act.force_per_volt(a)
     s = act.displacement_per_volt(a)
     v = np.asarray(voltage_V, float)
-    blocked = np.maximum(c * v + np.asarray(offset_N, float), 0.0)
+    mode = np.asarray(mode)
+    offset = np.asarray(offset_N, float)
+    blocked = np.maximum(c * v + offset, 0.0)
     free = 2.0 * s * v
-    return np.where(np.asarray(mode) == "blocked", blocked, free)
+    out = np.where(mode == "blocked", blocked, np.where(mode == "free", free, np.nan))
+    if push_m is not None:
+        stiff = np.maximum(c / s * np.asarray(push_m, float) + offset, 0.0)
+        out = np.where(mode == "stiffness", stiff, out)
+    return out
 
 
 class LegObservations:

@@ -7,16 +7,19 @@ Decision rules (fixed before any benchmark, documented in docs/gap.md):
 - a gap exists when the nominal lack-of-fit test gives p < 0.001;
 - a candidate is promising when its in-sample improvement of chi^2, scaled by the remaining over-dispersion, passes
   a likelihood-ratio test at 0.01 / (number of candidates);
-- a candidate defined by a time signature (creep) must carry it: its strength fitted from the within-dwell changes
-  alone must be significantly positive and at least half the full-data strength, else it is not promising;
+- a candidate defined by a time signature must carry it: its strength fitted from its hallmark contrasts alone
+  (creep: the within-dwell changes; hysteresis, since the third run: fall minus rise over the same voltage span)
+  must be significantly positive and at least half the full-data strength, else it is not promising;
 - among the promising, held-out z-error decides (held-out errors within 10 % are a tie, which goes to a single
-  candidate before a pair, then to the better in-sample chi^2); the winner is `attributed` when its held-out reduction's bootstrap
-  interval is above 0 and it closes at least half of the held-out gap above the noise floor, else `unexplained`;
+  candidate before a pair, then to the lower in-sample chi^2 + 2 x parameters); the winner is `attributed` when
+  its held-out reduction's bootstrap interval is above 0 and it closes at least half of the held-out gap above the
+  noise floor, else `unexplained`;
 - another candidate is confusable with the winner when their held-out errors differ by an amount whose bootstrap
   interval contains 0 (or by less than 10 %) AND their in-sample chi^2 (same number of parameters) differ by less than the 1 % point of
   chi^2(1) x over-dispersion: the winner's verdict is then `ambiguous` and `best` is null;
 - the strength interval is the union of the profile-likelihood interval and delete-a-group jackknife intervals
-  over condition folds and over phases within a cycle (t with K-1 degrees of freedom);
+  over condition folds and over phases within a cycle (t with K-1 degrees of freedom), and for a hallmark
+  candidate (creep) the interval of its strength from the dwell contrasts alone (a model-form term);
 - bootstrap intervals resample whole conditions within each experiment (run and mode).
 """
 
@@ -36,6 +39,7 @@ from analysis.gap import screening
 from analysis.gap.features import GapData
 from analysis.gap.library import CANDIDATES, LINEAR_ONLY
 from analysis.gap.problem import Problem
+from hamr_bench.errors import HamrBenchError
 
 GAP_ALPHA = 1e-3
 CLOSED_MIN = 0.5
@@ -85,7 +89,10 @@ def fit_pair(p: Problem, names: tuple[str, str], start: Sequence[float], mask: n
     m = np.ones(p.y.size, bool) if mask is None else mask
 
     def fun(x):
-        z, _ = p.residual(dict(zip(nl, map(float, x))), mask)
+        try:
+            z, _ = p.residual(dict(zip(nl, map(float, x))), mask)
+        except HamrBenchError:   # beyond the linkage's reach: a large, finite misfit steers the solver back
+            return np.full(int(m.sum()), 1e3)
         return z[m]
 
     r = least_squares(fun, x0, bounds=(lo, hi), x_scale=(hi - lo) * 0.1, diff_step=1e-3, max_nfev=40)
@@ -124,24 +131,38 @@ def jackknife_ci(s_hat: float, fold_strengths: Sequence[float]) -> list[float]:
     return [s_hat - t * se, s_hat + t * se]
 
 
-HALLMARK = ("creep",)   # candidates whose defining signature is a change during a constant-drive dwell
-HALLMARK_MIN_SHARE = 0.5   # the dwell contrasts alone must carry at least half the strength (like CLOSED_MIN)
+# Candidates defined by a time signature, with the (first, second) phases of a step whose difference carries it:
+# creep grows during a dwell at constant drive (high_early -> high_late); hysteresis reads the same voltages
+# differently rising and falling (rise: 2nd half of the up ramp, fall: 1st half of the down ramp, the same
+# voltage span). A gain loss lowers every amplitude, which both memory forms also fit in amplitude, but has
+# neither signature.
+HALLMARK: dict[str, tuple[str, str]] = {"creep": ("high_early", "high_late"), "hysteresis": ("rise", "fall")}
+HALLMARK_MIN_SHARE = 0.5   # the contrasts alone must carry at least half the strength (like CLOSED_MIN)
+HALLMARK_KEY = {"creep": "dwell_contrast", "hysteresis": "ramp_contrast"}   # its name in the ranking entry
+
+
+def hallmark_pairs(p: Problem, name: str = "creep") -> np.ndarray:
+    """(first, second) row index pairs of the same step for the candidate's hallmark phases (creep: high_early,
+    high_late; hysteresis: rise, fall): their difference carries the signature."""
+    first, second = HALLMARK[name]
+    idx = {(r.run, r.step, r.phase): i for i, r in enumerate(p.rows)}
+    out = [(idx[(a, b, first)], i) for (a, b, ph), i in idx.items()
+           if ph == second and (a, b, first) in idx]
+    return np.array(out, int).reshape(-1, 2)
 
 
 def dwell_pairs(p: Problem) -> np.ndarray:
     """(high_early, high_late) row index pairs of the same step: their difference is the change during a dwell."""
-    idx = {(r.run, r.step, r.phase): i for i, r in enumerate(p.rows)}
-    out = [(idx[(a, b, "high_early")], i) for (a, b, ph), i in idx.items()
-           if ph == "high_late" and (a, b, "high_early") in idx]
-    return np.array(out, int).reshape(-1, 2)
+    return hallmark_pairs(p, "creep")
 
 
 def dwell_contrast(p: Problem, name: str, s_hat: float) -> dict[str, Any]:
-    """The candidate's strength fitted from the within-dwell changes alone (late minus early high-dwell rows of
-    each step, nuisances as in the full fit), with its standard error scaled by the contrasts' own
-    over-dispersion. `applicable`: the full-data strength predicts a dwell change this data can detect (1 %);
-    `supported`: the contrast strength is significantly positive (one-sided 1 %) and at least half of s_hat."""
-    pr = dwell_pairs(p)
+    """The candidate's strength fitted from its hallmark contrasts alone (creep: late minus early high-dwell rows
+    of each step; hysteresis: fall minus rise rows; nuisances as in the full fit), with its standard error scaled
+    by the contrasts' own over-dispersion. `applicable`: the full-data strength predicts a contrast this data can
+    detect (1 %); `supported`: the contrast strength is significantly positive (one-sided 1 %) and at least half
+    of s_hat."""
+    pr = hallmark_pairs(p, name)
     out: dict[str, Any] = {"n_pairs": int(pr.shape[0]), "applicable": False, "supported": True}
     if pr.shape[0] < 2 or s_hat == 0:
         return out
@@ -153,7 +174,7 @@ def dwell_contrast(p: Problem, name: str, s_hat: float) -> dict[str, Any]:
         return (z[late] * p.sigma[late] - z[e] * p.sigma[e]) / sc
 
     c0 = contrast({})
-    dc = (c0 - contrast({name: s_hat})) / s_hat   # the contrast is linear in a creep-type strength
+    dc = (c0 - contrast({name: s_hat})) / s_hat   # linear in a creep strength; a play's, to first order
     info = float(dc @ dc)
     if info <= 0:
         return out
@@ -165,6 +186,22 @@ def dwell_contrast(p: Problem, name: str, s_hat: float) -> dict[str, Any]:
     supported = g * np.sign(s_hat) / se > stats.norm.ppf(0.99) and g / s_hat >= HALLMARK_MIN_SHARE
     out.update(strength=g, se=se, applicable=bool(applicable), supported=bool(supported or not applicable))
     return out
+
+
+def hallmark_ci(h: dict[str, Any] | None) -> list[float] | None:
+    """The 95 % interval of the strength fitted from the hallmark (within-dwell) contrasts alone (t with
+    n_pairs - 1 degrees of freedom), or None when there is no such estimate.
+
+    A model-form term of the strength interval: the full-data fit and the dwell contrasts estimate the same
+    strength from different aspects of the data (amplitudes over the whole timeline vs growth within a dwell).
+    Under the true form they agree; under a form that is right on average but wrong in time (a log law against
+    a sum of exponentials whose fastest term is 30 ms) they part, by the same amount in every condition and
+    nearly every phase, so neither jackknife sees it. Which of the two the mismatch biases more, the data cannot
+    say, so the interval spans both."""
+    if not h or "strength" not in h or not h.get("applicable") or not np.isfinite(h.get("se", math.nan)):
+        return None
+    t = float(stats.t.ppf(0.975, max(int(h["n_pairs"]) - 1, 1)))
+    return [float(h["strength"] - t * h["se"]), float(h["strength"] + t * h["se"])]
 
 
 def condition_folds(p: Problem) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
@@ -194,7 +231,9 @@ def phase_groups(p: Problem) -> list[np.ndarray]:
     on average but wrong in time (a log law against a sum of exponentials) gives different strengths from
     different phases, which no condition split shows, since every condition shares the same cycle timing."""
     phases = np.array([r.phase for r in p.rows])
-    return [phases == ph for ph in sorted(set(phases)) if 0 < np.sum(phases == ph) < phases.size]
+    # only the phases WITHIN A CYCLE: an undriven hold (static test, stiffness sweep) is not a phase of the cycle
+    # timing, and for a stage effect it holds all the information (deleting it leaves the strength unidentified)
+    return [phases == ph for ph in sorted(set(phases) - {"hold"}) if 0 < np.sum(phases == ph) < phases.size]
 
 
 def heldout_z(p: Problem, names: Sequence[str], folds: list[np.ndarray], start: Sequence[float],
@@ -263,8 +302,9 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     for n in names:
         if n in LINEAR_ONLY:
             c = p.chi2({n: 0.0})
-            rms, slopes, cov = p.drift_rms_slope({})
-            singles[n] = {"strength": rms, "chi2": c, "df": slopes.size, "slopes": slopes, "cov": cov}
+            rate, knots, cov, rate_ci = p.drift_rms_slope({})
+            singles[n] = {"strength": rate, "chi2": c, "df": knots.size, "knots": knots, "cov": cov,
+                          "rate_ci": rate_ci}
         else:
             s, c = fit_single(p, n)
             singles[n] = {"strength": s, "chi2": c, "df": 1}
@@ -294,12 +334,19 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     views: dict[str, Problem] = {}
     for n in promising:
         if n not in LINEAR_ONLY:
-            # re-estimate the sensor lags under this candidate, then refit it there
-            q = p.relinearised({n: singles[n]["strength"]})
-            s_new, c_new = fit_single(q, n)
+            # re-estimate the sensor lags and contact shifts under this candidate, then refit it there (again
+            # while the strength still moves by more than 1 % of its range: the shift and a stage play trade)
+            lo_n, hi_n = _bounds(n)
+            s_old = singles[n]["strength"]
+            for _ in range(3):
+                q = p.relinearised({n: s_old})
+                s_new, c_new = fit_single(q, n)
+                if abs(s_new - s_old) <= 0.01 * (hi_n - lo_n):
+                    break
+                s_old = s_new
             singles[n].update(strength=s_new, chi2=c_new)
         else:
-            q = p
+            q = p.relinearised({n: 0.0})   # the contact shifts refitted with the drift baselines along
         views[n] = q
         fs: list[float] = []
         hz = heldout_z(q, [n], folds, [singles[n]["strength"]], fs)
@@ -333,7 +380,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
         # pair), then to the better in-sample chi^2 among single candidates (same number of parameters: AIC order)
         tied = [k for k in order if "+" not in k and rms(heldz[k]) < EQUIVALENT_RATIO * rms(heldz[order[0]])]
         if tied:
-            lead = min(tied, key=lambda k: singles[k]["chi2"])
+            lead = min(tied, key=lambda k: singles[k]["chi2"] + 2 * singles[k]["df"])   # AIC: drift has many
             order.remove(lead)
             order.insert(0, lead)
     winner = order[0] if order else None
@@ -364,16 +411,25 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
             entry["in_sample_chi2"] = v["chi2"]
             entry["screen_score_chi2"] = scr["scores"].get(key, {}).get("score_chi2")
             if key in hallmarks:
-                entry["dwell_contrast"] = hallmarks[key]
+                entry[HALLMARK_KEY[key]] = hallmarks[key]
             if key in promising:
                 if key in LINEAR_ONLY:
-                    se = float(np.sqrt(np.mean(np.diag(v["cov"])) * scale2))
-                    entry["strength_ci95"] = [max(0.0, v["strength"] - 1.96 * se), v["strength"] + 1.96 * se]
+                    # from draws of the knot values (noise scale 1: the over-dispersion is mostly the drift itself)
+                    entry["strength_ci95"] = list(v["rate_ci"])
                 else:
                     prof = strength_ci(views[key], key, v["strength"], v["chi2"], scale2)
                     jack = jackknife_ci(v["strength"], v.get("fold_strengths", []))
                     jack_ph = jackknife_ci(v["strength"], v.get("phase_strengths", []))
-                    entry["strength_ci95"] = [min(prof[0], jack[0], jack_ph[0]), max(prof[1], jack[1], jack_ph[1])]
+                    parts = [prof, jack, jack_ph]
+                    # creep only: its form mismatch is the same in every condition and nearly every phase, so no
+                    # jackknife sees it; hysteresis' (play vs Bouc-Wen) differs between rise and fall, which the
+                    # phase jackknife does see
+                    dwell_ci = hallmark_ci(hallmarks.get(key)) if key == "creep" else None
+                    if dwell_ci is not None:
+                        parts.append(dwell_ci)
+                        entry["strength_ci95_dwell_contrast"] = dwell_ci
+                    lo_b, hi_b = _bounds(key)   # the union, within the candidate's physical range
+                    entry["strength_ci95"] = [max(lo_b, min(c[0] for c in parts)), min(hi_b, max(c[1] for c in parts))]
                     entry["strength_ci95_profile"] = prof
                     entry["strength_ci95_condition_jackknife"] = jack
                     entry["strength_ci95_phase_jackknife"] = jack_ph

@@ -9,9 +9,9 @@ phase_labels`' phases:
     high_early first 30 % of the high dwell        high_late last half of the high dwell
     fall       first half of the down ramp
 
-and a static step into one `hold` window. A row is the mean of the sensor over its window, averaged over the
-step's cycles; its standard error comes from the cycle-to-cycle scatter pooled over the run's steps of that phase
-(pure error). Camera rows are relative to the same cycle's low_late window (the camera has no absolute zero).
+and an undriven step (the leg's static test, the actuator's stiffness sweep) into one `hold` window. A row is
+the mean of the sensor over its window, averaged over the step's cycles; its standard error comes from the
+cycle-to-cycle scatter pooled over the run's steps of that phase (pure error). Camera rows are relative to the same cycle's low_late window (the camera has no absolute zero).
 
 For the model, each row carries `eval_times_s` (a few points in each of its windows; the prediction is their mean)
 and the run carries the command timelines (bias, drive, stage targets), the contact and tare times, so any
@@ -158,6 +158,7 @@ def load_run(path: Path | str, index: int) -> RunTrace:
     period = dl + 2 * r + dh
     rel = _windows(dl, r, dh)
     hold_s = params.get("hold_s")
+    stiff_hold_s = (params.get("stiffness") or {}).get("hold_s")
     steps = [i for i, e in enumerate(events) if e.kind == "step"]
     for n, i in enumerate(steps):
         ev = events[i]
@@ -217,8 +218,10 @@ def load_run(path: Path | str, index: int) -> RunTrace:
                           **base)
                 row._cycle_values = vals  # type: ignore[attr-defined]
                 run.rows.append(row)
-        elif tf.size and protocol == "static":
-            h = float(hold_s) if hold_s else 0.5
+        elif tf.size and (protocol == "static" or mode == "stiffness"):
+            # undriven hold: the leg's static test, or the actuator's stiffness sweep (its own hold time)
+            h_rec = stiff_hold_s if mode == "stiffness" else hold_s
+            h = float(h_rec) if h_rec else 0.5
             a, b = ev.time_s, min(ev.time_s + h, t_next)
             i0, i1 = np.searchsorted(tf, a, "left"), np.searchsorted(tf, b, "right")
             if i1 - i0 < 2:

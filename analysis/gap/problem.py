@@ -13,11 +13,15 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from analysis.gap.features import GapData
+from hamr_bench.errors import HamrBenchError
 from analysis.gap.library import RunEngine
 
 OFFSET_STEP = {"leg": 2e-6, "actuator": 1e-3}   # m (h0) and N (f0): finite-difference steps for the columns
 LAG_BOUNDS_S = (0.0, 0.06)
 LAG_STEP_S = 2e-3
+# contact shift search range: actuator, 2 coarse steps of the trial's search plus the largest play; leg, the
+# default search's threshold over the softest leg at zero sag (0.4 mN at ~2 N/m) with margin
+SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 
 
 class Problem:
@@ -41,9 +45,12 @@ class Problem:
             self.slices.append(slice(start, start + e.n_rows))
             start += e.n_rows
         self.lag: dict[tuple[str, str], float] = {}
+        self.contact_shift: dict[int, float] = {}
         self._pinv_cache: dict = {}
         self.pure_dof = int(sum(max(r.n - 1, 0) for r in self.rows))
+        self._fit_contact_shifts()
         self._fit_lags()
+        self._fit_contact_shifts()
         self._offset_cols = self._offset_columns()
         self._drift_cols = self._drift_columns()
 
@@ -54,9 +61,47 @@ class Problem:
 
     def model(self, strengths: dict[str, float]) -> np.ndarray:
         out = np.empty(self.y.size)
-        for e, sl in zip(self.engines, self.slices):
-            out[sl] = e.predict(strengths, self._run_lag(e))
+        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
+            out[sl] = e.predict(strengths, self._run_lag(e), shift_m=self.contact_shift.get(k, 0.0))
         return out
+
+    def _fit_contact_shifts(self, strengths: dict[str, float] | None = None) -> None:
+        """Per run with a contact search, where the sensor surface really sits relative to the search's zero: the
+        nonlinear form of the run's offset nuisance (h0 for a leg, f0 = -k_act x0 for the actuator), which the
+        linear offset column is then taken about. The search's zero can be far off: on the stiff bare actuator a
+        stage with play b shows a force plateau while backing off (the carriage stays put for the first b), which
+        misplaces the extrapolated zero by up to ~b; on a leg a drifting force baseline moves the threshold
+        crossing. Rows this leaves out of contact read 0 (a leg at low voltage may not reach the sensor at all),
+        which an offset linearised at the search's zero cannot reach. With `sensor_drift` in `strengths`, each
+        run's drift baseline is fitted along (projected out)."""
+        strengths = strengths or {}
+        drift = "sensor_drift" in strengths
+        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
+            if not e.has_offset():
+                continue
+            force = e.is_force_row
+            y, sig = self.y[sl][force], self.sigma[sl][force]
+            lag = self._run_lag(e)
+            basis = e.drift_columns()[force] / sig[:, None] if drift else np.zeros((int(force.sum()), 0))
+            proj = np.linalg.pinv(basis) if basis.shape[1] else None
+
+            def cost(x0: float) -> float:
+                try:
+                    m = e.predict(strengths, lag, shift_m=x0)[force]
+                except HamrBenchError:   # a shift beyond the linkage's reach
+                    return math.inf
+                z = np.nan_to_num((y - m) / sig)
+                if proj is not None:
+                    z = z - basis @ (proj @ z)
+                return float(z @ z)
+
+            bound = SHIFT_BOUND_M[e.run.fixture]
+            grid = np.linspace(-bound, bound, 49)
+            costs = [cost(x) for x in grid]
+            j = int(np.argmin(costs))
+            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+            r = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": bound * 1e-4})
+            self.contact_shift[k] = float(r.x) if r.fun <= costs[j] else float(grid[j])
 
     def _offset_columns(self) -> np.ndarray:
         cols = []
@@ -65,8 +110,9 @@ class Problem:
                 continue
             step = OFFSET_STEP[e.run.fixture]
             lag = self._run_lag(e)
+            x0 = self.contact_shift.get(k, 0.0)
             col = np.zeros(self.y.size)
-            col[sl] = (e.predict({}, lag, step) - e.predict({}, lag, -step)) / (2 * step)
+            col[sl] = (e.predict({}, lag, step, x0) - e.predict({}, lag, -step, x0)) / (2 * step)
             col[sl] = np.where(e.is_force_row, col[sl], 0.0)
             if np.any(col):
                 cols.append(col / self.sigma)
@@ -75,37 +121,49 @@ class Problem:
         # which a lag cannot), so every candidate is fitted with the lag free.
         for g in sorted(self.lag):
             col = np.zeros(self.y.size)
-            for e, sl in zip(self.engines, self.slices):
+            for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
                 if e.run.fixture != g[0]:
                     continue
                 lag_p, lag_m = self._run_lag(e), self._run_lag(e)
                 lag_p[g[1]] += LAG_STEP_S
                 lag_m[g[1]] = max(lag_m[g[1]] - LAG_STEP_S, 0.0)
                 width = lag_p[g[1]] - lag_m[g[1]]
-                col[sl] = (e.predict({}, lag_p) - e.predict({}, lag_m)) / width
+                x0 = self.contact_shift.get(k, 0.0)
+                col[sl] = (e.predict({}, lag_p, shift_m=x0) - e.predict({}, lag_m, shift_m=x0)) / width
             if np.any(col):
                 cols.append(col / self.sigma)
         return np.array(cols).T if cols else np.zeros((self.y.size, 0))
 
     def _drift_columns(self) -> np.ndarray:
+        """Columns of the piecewise-linear drift baselines (one per knot after each run's tare); the knot times
+        of each column's run go to `self._drift_knots` (run index, knot times, column numbers)."""
         cols = []
-        for e, sl in zip(self.engines, self.slices):
-            col = np.zeros(self.y.size)
-            col[sl] = e.drift_column()
-            if np.any(col):
+        self._drift_knots: list[tuple[int, np.ndarray, list[int]]] = []
+        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
+            block = e.drift_columns()
+            mine = []
+            for j in range(block.shape[1]):
+                col = np.zeros(self.y.size)
+                col[sl] = block[:, j]
+                mine.append(len(cols))
                 cols.append(col / self.sigma)
+            if mine:
+                self._drift_knots.append((k, e.drift_knots_s(), mine))
         return np.array(cols).T if cols else np.zeros((self.y.size, 0))
 
     def relinearised(self, strengths: dict[str, float]) -> "Problem":
-        """A copy whose sensor lags are re-estimated with `strengths` in the model and whose nuisance columns are
-        rebuilt there. A ramp cannot tell a time lag from a play-type memory (both delay every crossing); only the
-        plateaus can, so each candidate is judged with the lag estimated under that candidate."""
+        """A copy whose sensor lags and contact shifts are re-estimated with `strengths` in the model and whose
+        nuisance columns are rebuilt there. A ramp cannot tell a time lag from a play-type memory (both delay every
+        crossing); only the plateaus can, so each candidate is judged with the lag estimated under that candidate."""
         import copy
 
         q = copy.copy(self)
         q.lag = dict(self.lag)
+        q.contact_shift = dict(self.contact_shift)
         q._pinv_cache = {}
+        q._fit_contact_shifts(strengths)
         q._fit_lags(strengths)
+        q._fit_contact_shifts(strengths)
         q._offset_cols = q._offset_columns()
         return q
 
@@ -122,7 +180,7 @@ class Problem:
                 tot = 0.0
                 for i in idx:
                     e, sl = self.engines[i], self.slices[i]
-                    m = e.predict(strengths, self._run_lag(e))
+                    m = e.predict(strengths, self._run_lag(e), shift_m=self.contact_shift.get(i, 0.0))
                     z = ((self.y[sl] - m) / self.sigma[sl])[np.array([r.quantity == g[1] for r in e.rows])]
                     tot += float(np.sum(z * z))
                 return tot
@@ -164,19 +222,54 @@ class Problem:
         return z0, np.zeros(0)
 
     def chi2(self, strengths: dict[str, float], mask: np.ndarray | None = None) -> float:
-        z, _ = self.residual(strengths, mask)
+        """Sum of squared z on `mask` rows; inf where the strengths (with a run's contact shift) put the foot
+        beyond the linkage's reach."""
+        try:
+            z, _ = self.residual(strengths, mask)
+        except HamrBenchError:
+            return math.inf
         m = np.ones(self.y.size, bool) if mask is None else mask
         return float(np.sum(z[m] ** 2))
 
     def n_nuisance(self, names: Sequence[str]) -> int:
         return self.design(names).shape[1]
 
-    def drift_rms_slope(self, strengths: dict[str, float]) -> tuple[float, np.ndarray]:
-        """RMS of the fitted drift slopes (N/s) and their covariance-based standard errors."""
+    def drift_rms_slope(self, strengths: dict[str, float], draws: int = 400, seed: int = 0
+                        ) -> tuple[float, np.ndarray, np.ndarray, list[float]]:
+        """The drift baselines fitted (with the nuisances) and their wander rate over every run's knots (the
+        baseline is 0 at the tare): q^2 = (sum dB^2 - its expectation from the knot values' noise) / sum dt, in
+        N/sqrt(s), the scale of a random walk's strength. Returns (q, knot values in N, their covariance in N^2 at
+        unit noise scale, a 95 % interval of q from draws of the knot values, each bias-corrected the same way)."""
         z0 = np.nan_to_num((self.y - self.model(strengths)) / self.sigma)
         a = self.design(list(strengths) + ["sensor_drift"])
         coef, *_ = np.linalg.lstsq(a, z0, rcond=None)
         n_off = self._offset_cols.shape[1]
-        slopes = coef[n_off:]
+        values = coef[n_off:]
         cov = np.linalg.pinv(a.T @ a)[n_off:, n_off:]
-        return float(math.sqrt(np.mean(slopes ** 2))) if slopes.size else 0.0, slopes, cov
+        if values.size == 0:
+            return 0.0, values, cov, [0.0, 0.0]
+        # differences of consecutive knot values per run (the first from the tare's 0), as one linear map
+        rows, span = [], 0.0
+        for _run, knots, cols in self._drift_knots:
+            prev = None
+            for c in cols:
+                d = np.zeros(values.size)
+                d[c] = 1.0
+                if prev is not None:
+                    d[prev] = -1.0
+                rows.append(d)
+                prev = c
+            span += float(knots[-1] - knots[0])
+        diff = np.array(rows)
+        noise = float(np.trace(diff @ cov @ diff.T))
+
+        def rate(v: np.ndarray) -> np.ndarray:
+            ss = np.sum((np.atleast_2d(v) @ diff.T) ** 2, axis=1)
+            return np.sqrt(np.maximum(ss - noise, 0.0) / span)
+
+        q = float(rate(values)[0])
+        sample = np.random.default_rng(seed).multivariate_normal(values, cov, size=draws, method="eigh")
+        qs = rate(sample)
+        # basic (pivot) interval: the draws scatter about q as q about the truth
+        return q, values, cov, [max(0.0, 2 * q - float(np.percentile(qs, 97.5))),
+                                max(0.0, 2 * q - float(np.percentile(qs, 2.5)))]

@@ -28,8 +28,11 @@ NULL = "none"
 TRIAL_PROTOCOLS: dict[str, list[str]] = {
     # 4 cycles: the actuator has one repetition of three voltages, so its noise floor per phase comes from the
     # cycle-to-cycle scatter alone; with 2 cycles that was 3 degrees of freedom per pool (a floor off by 3x)
+    # the stiffness sweep to the protocol's largest push (40 um, 82 mN on the 2-layer actuator): the stage's play
+    # (up to 30 um in the draw) also misplaces the contact search's zero, and the loading branch must cross that
+    # gap before it touches
     "actuator": ["voltages_V=100,175,250", "repetitions=1", "drive.cycles=4", "contact.coarse_step_m=2e-5",
-                 "contact.fine_step_m=1e-6"],
+                 "contact.fine_step_m=1e-6", "stiffness.steps=8", "stiffness.max_push_m=4e-5"],
     "blocked-force": ["voltages_V=100,150,200,250", "repetitions=2", "drive.cycles=2"],
     "sag-sweep": ["repetitions=2", "drive.cycles=2"],    # the return to zero between sweeps reverses the stage
     "static": ["hold_s=1.0"],   # 0.25 mm steps loading and unloading: the reversal is where backlash shows
@@ -42,11 +45,44 @@ EXCLUDED_FROM_DRAW: dict[str, str] = {}
 # U(0.7, 1.3): stage backlash (reversal error) of lead-screw stages with a stepper and a motor-side encoder is
 # specified from a few um to tens of um (Newport: "several microns" on reversal for a simple motorizer).
 DRAW_LOG_RANGE: dict[str, tuple[float, float]] = {"stage_backlash": (3e-6, 30e-6)}
-# The smallest backlash this protocol set can see, computed before any trial (docs/gap.md): the undriven design-4
-# leg is ~2.5 N/m in the static test, a static hold row has a ~10 uN standard error, so b >= 10 um gives an up/down
-# force step of >= 2.5 standard errors on each of ~24 rows. Below it the trials count in every score, and the
-# accuracy is ALSO reported without them.
-DETECTION_LIMIT: dict[str, float] = {"stage_backlash": 10e-6}
+# Rate of the simulated actuator rig's force sensor (rigs/sim.toml [actuator_force_sensor] sample_rate_Hz).
+ACTUATOR_FORCE_RATE_HZ = 500.0
+
+
+def backlash_detection_limit_m(overdispersion: float = 1.0) -> float:
+    """The smallest stage backlash this protocol set can see, from first principles (not from trial outcomes).
+
+    The actuator protocol's stiffness sweep reverses the stage against the undriven 2-layer actuator (k_act from
+    the model). A play b lowers every loading row relative to the unloading rows by k_act b (the contact offset
+    absorbs the common part). A hold row's standard error is the Nano17's per-sample noise (six gauges of
+    `SimNano17Spec.noise_V` through the calibration's Fz row) over sqrt(hold x rate). The likelihood-ratio
+    statistic of b is then (k_act b / se)^2 n_up n_down / (n_up + n_down) (a two-group mean contrast); the
+    limit is the b at which it reaches the screening threshold chi^2(1) at 0.01 / (number of candidates), times
+    the over-dispersion the screen divides by. The leg's static test (1-5 N/m) adds nothing at this scale."""
+    from scipy import stats
+
+    from hamr_bench.model import actuator as act
+    from hamr_bench.model import actuator_preset
+    from hamr_bench.protocols.actuator import StiffnessParams
+    from sim_devices.bench import NANO17_CAL
+    from sim_devices.daq_sim import SimNano17Spec, load_calibration_SI
+
+    k = act.stiffness_N_per_m(actuator_preset(2, "effective"))
+    cal = load_calibration_SI(NANO17_CAL)
+    noise_V = SimNano17Spec(gauge_channels=tuple(f"ai{i}" for i in range(6)), calibration_SI=cal).noise_V
+    sigma_N = float(np.linalg.norm(cal[2])) * noise_V
+    sweep = StiffnessParams(steps=8, max_push_m=40e-6)   # the trial's (TRIAL_PROTOCOLS)
+    se_N = sigma_N / np.sqrt(sweep.hold_s * ACTUATOR_FORCE_RATE_HZ)
+    dirs = [d for _, d in sweep.pushes_m()]
+    n_up, n_down = dirs.count("up"), dirs.count("down")
+    threshold = float(stats.chi2.ppf(1 - 0.01 / len(LIBRARY), 1)) * overdispersion
+    return float(np.sqrt(threshold * (n_up + n_down) / (n_up * n_down)) * se_N / k)
+
+
+# Below the limit the trials count in every score, and the accuracy is ALSO reported without them. (Before the
+# actuator protocol reversed the stage against the actuator, the limit was ~10 um: only the leg's static test
+# reversed it, against 1-5 N/m.)
+DETECTION_LIMIT: dict[str, float] = {"stage_backlash": backlash_detection_limit_m()}
 
 # Coverage is scored on effects whose size means the same physical thing in generator and candidate. For most the
 # strength itself does (loop half-width, per-decade creep, blocked-force loss, compliance, metres); for two the

@@ -98,7 +98,8 @@ def test_fit_params_move_the_nominal_model(recordings):
     data = load_gap_data([recordings["null"]])
     fit = {"designs": {"4": {"bias": {"value": design_preset(4).bias_m + 30e-6, "unit": "m"}}}}
     with_fit, nominal = Problem(data, fit), Problem(data)
-    with_fit.lag = dict(nominal.lag)   # same sensor lag (each Problem estimates its own against its nominal)
+    # same sensor lag and contact shifts (each Problem estimates its own nuisances against its nominal)
+    with_fit.lag, with_fit.contact_shift = dict(nominal.lag), dict(nominal.contact_shift)
     assert np.allclose(with_fit.model({}), nominal.model({"bias_error": 30e-6}), rtol=1e-9, atol=0)
     assert not np.allclose(with_fit.model({}), nominal.model({}), rtol=1e-3, atol=0)
 

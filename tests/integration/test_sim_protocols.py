@@ -107,6 +107,15 @@ def test_actuator_blocked_force_and_free_displacement_match_model(tmp_path):
             high = dwell_means(reader, "/force", "force_N", V, start, end)["high"]
             # contact is found to within a fraction of a um on a ~2700 N/m actuator: ~1 mN
             assert np.mean(high) == pytest.approx(float(actuator.blocked_force_N(V)), abs=2e-3)
+        elif condition["mode"] == "stiffness":
+            # undriven tip pushed sag_m past contact: F = k_act x push (same contact accuracy as above); the hold
+            # ends when the stage moves on
+            forces = reader.scalars("/force")
+            moves = reader.scalars("/stage/command")["time_s"]
+            end = min(end, *moves[moves > start][:1])
+            sel = (forces["time_s"] > start) & (forces["time_s"] < end)
+            expected = actuator.stiffness_N_per_m * condition["sag_m"]
+            assert np.mean(forces["force_N"][sel]) == pytest.approx(expected, abs=2e-3)
         else:
             means = dwell_means(reader, "/camera/displacement", "displacement_m", V, start, end, margin_s=0.15)
             stroke = np.mean(means["high"]) - np.mean(means["low"])
