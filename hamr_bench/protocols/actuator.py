@@ -25,9 +25,9 @@ SUMMARY = "bare actuator stiffness (undriven push, load and unload), blocked for
 # The largest push the sweep may ask for. The stiffest actuator the model knows (3 layers, Table I "reported"
 # values) is ~9.5 kN/m: 40 um presses ~0.38 N, under the actuator rigs' force limits (0.5-0.6 N); the runner's
 # force-limit check between stage increments still stops anything beyond. The default, 30 um, presses 82 mN on
-# the 3-layer actuator with the effective values (2.7 kN/m) and 0.28 N with the reported ones. Push past the
-# play you expect: the contact search backs off to find zero, and a stage with play b misplaces that zero by
-# up to ~b (a gap), which the loading branch must cross before it touches.
+# the 3-layer actuator with the effective values (2.7 kN/m) and 0.28 N with the reported ones. The contact search
+# leaves the stage at zero with any play taken up toward the tip (hamr_bench/protocols/contact.py), so the
+# loading branch touches from its first push; the unloading branch comes back down through the play.
 MAX_PUSH_M = 40e-6
 
 
@@ -86,7 +86,8 @@ def step_count(p: Params) -> int:
 
 
 def _stiffness_sweep(p: Params, zero_m: float):
-    """Undriven: push the tip past contact step by step and back; the stage returns to zero sag afterwards."""
+    """Undriven: push the tip past contact step by step and back; the stage returns to zero sag afterwards,
+    approaching it from below."""
     index = 0
     for push_m, direction in p.stiffness.pushes_m():
         yield MoveStage(zero_m + push_m)
@@ -96,6 +97,9 @@ def _stiffness_sweep(p: Params, zero_m: float):
         yield Dwell(p.stiffness.hold_s)
         index += 1
     if index:
+        # Back to zero from below, as the contact search left it: coming down from the last push would leave a
+        # stage's play (backlash) between the tip and the sensor, pressing it by k_act x play in the blocked steps.
+        yield MoveStage(zero_m - p.contact.clearance_m)
         yield MoveStage(zero_m)
     return index
 

@@ -1,6 +1,12 @@
-"""The zero-sag approach shared by the leg protocols: bring the force sensor up to the leg until a force threshold
-says it touches, then back off until contact is released. The runner executes the search (`FindContact`); this
-module owns its parameters and the sub-plan."""
+"""The zero-sag approach shared by the leg and actuator protocols: bring the force sensor up to the leg (or tip)
+until a force threshold says it touches, back off clear, and approach again in fine steps; zero sag is where the
+line through the fine steps in contact reaches zero force. The runner executes the search (`FindContact`); this
+module owns its parameters and the sub-plan.
+
+Every position the zero comes from is reached moving toward the leg, and so is the zero itself at the end: a
+lead-screw stage's play (backlash, ~3-30 um) is then taken up the same way as in the loading moves that follow, and
+does not shift the zero. `clearance_m` is how far the search backs off before approaching again: more than the
+play the stage may have."""
 
 from __future__ import annotations
 
@@ -17,9 +23,10 @@ class ContactParams:
     coarse_step_m: float = 50e-6
     fine_step_m: float = 5e-6
     max_travel_m: float = 8e-3
+    clearance_m: float = 50e-6
 
     def validate(self) -> None:
-        for name in ("threshold_N", "coarse_step_m", "fine_step_m", "max_travel_m"):
+        for name in ("threshold_N", "coarse_step_m", "fine_step_m", "max_travel_m", "clearance_m"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"contact {name}: expected a positive value, got {getattr(self, name)!r}")
         if self.fine_step_m > self.coarse_step_m:
@@ -35,5 +42,6 @@ def find_zero_sag(contact: ContactParams) -> Generator:
         coarse_step_m=contact.coarse_step_m,
         fine_step_m=contact.fine_step_m,
         max_travel_m=contact.max_travel_m,
+        clearance_m=contact.clearance_m,
     )
     return zero_sag_m

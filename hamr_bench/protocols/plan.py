@@ -42,14 +42,17 @@ class Tare:
 @dataclass(frozen=True)
 class FindContact:
     """Approach the leg with the stage from the present position in `direction_sign` until the force exceeds
-    `threshold_N`, then back off in `fine_step_m` steps until contact is lost. Sends back the stage position of
-    the zero-sag (just touching) point."""
+    `threshold_N`; back off by `clearance_m` past the last step that did not touch and approach again in
+    `fine_step_m` steps, so that every position the zero is estimated from is reached moving toward the leg (a
+    stage's play, taken up the same way, then cannot misplace it). Sends back the stage position of the zero-sag
+    (just touching) point, approached from the same side."""
 
     threshold_N: float
     coarse_step_m: float
     fine_step_m: float
     max_travel_m: float
     direction_sign: float = 1.0
+    clearance_m: float = 50e-6
 
 
 @dataclass(frozen=True)

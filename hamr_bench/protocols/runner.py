@@ -248,28 +248,54 @@ class Runner:
             position += sign * msg.coarse_step_m
             self._move_in_safe_steps(position)
             force = self._mean_force(FORCE_WINDOW_S)
-        # Back off in fine steps until contact is released, keeping the (position, force) pairs in contact; the
-        # zero-sag point is where a straight line through them reaches zero force (the leg is linear over a few
-        # steps), which is finer than the step and not biased by the release threshold.
+        # Back off until contact is released, then by more than the stage's play, and approach again in fine steps,
+        # keeping the (position, force) pairs in contact. Every pair is then taken moving toward the leg, with the
+        # play taken up as in the loading moves that follow; pairs taken while backing off through the contact (as
+        # before) left the carriage still for the first `play` of the back-off, a force plateau that tilted the line
+        # and moved the zero by up to the play. The zero-sag point is where a straight line through the pairs
+        # reaches zero force (the leg is linear over a few steps): finer than the step, and not biased by the
+        # release threshold.
         release_N = msg.threshold_N / 4
-        touching = [(position, force)]
         backed = 0.0
         while force > release_N and backed < 2 * msg.coarse_step_m + msg.max_travel_m:
-            position -= sign * msg.fine_step_m
-            backed += msg.fine_step_m
+            position -= sign * msg.coarse_step_m
+            backed += msg.coarse_step_m
+            self._move_in_safe_steps(position)
+            force = self._mean_force(FORCE_WINDOW_S)
+        released = position
+        self._move_in_safe_steps(self._clamp_to_limits(released - sign * msg.clearance_m))
+        self._move_in_safe_steps(released)
+        force = self._mean_force(FORCE_WINDOW_S)
+        touching = [(position, force)] if force > release_N else []
+        travelled = 0.0
+        while force < msg.threshold_N:
+            if travelled >= backed + 2 * msg.coarse_step_m:
+                raise DeviceError(
+                    f"contact moved between the coarse and the fine approach (force stayed below "
+                    f"{msg.threshold_N * 1e3:.2f} mN over {travelled * 1e3:.3f} mm, past where it had touched): is "
+                    "the force sensor drifting, or the leg loose?", device="force_sensor")
+            position += sign * msg.fine_step_m
+            travelled += msg.fine_step_m
             self._move_in_safe_steps(position)
             force = self._mean_force(FORCE_WINDOW_S)
             if force > release_N:
                 touching.append((position, force))
-        zero_sag_m = self._extrapolate_zero_force(touching, fallback_m=position + sign * msg.fine_step_m,
+        # With fewer than three pairs (a very stiff tip) the zero is taken half a step before the first touch.
+        first_touch = touching[0][0] if touching else position
+        zero_sag_m = self._extrapolate_zero_force(touching[::-1], fallback_m=first_touch - sign * msg.fine_step_m / 2,
                                                   window_m=2 * msg.coarse_step_m)
-        low, high = self.rig.stage.limits_m
-        zero_sag_m = min(max(zero_sag_m, low), high)
+        zero_sag_m = self._clamp_to_limits(zero_sag_m)
+        # The approach ended past the zero: reach the zero from the same side too.
+        self._move_in_safe_steps(self._clamp_to_limits(zero_sag_m - sign * msg.clearance_m))
         self._move_in_safe_steps(zero_sag_m)
         position = zero_sag_m
         self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
                     stage_position_m=position)
         return position
+
+    def _clamp_to_limits(self, position_m: float) -> float:
+        low, high = self.rig.stage.limits_m
+        return min(max(position_m, low), high)
 
     @staticmethod
     def _extrapolate_zero_force(points: list[tuple[float, float]], fallback_m: float, window_m: float) -> float:

@@ -13,6 +13,7 @@ import pytest
 from hamr_bench.model import actuator_preset, powertrain
 from hamr_bench.protocols.session import RunRequest, run_protocol
 from hamr_bench.recording import RecordingReader
+from sim_devices.bench import BenchSettings
 
 FAST = ["drive.cycles=2", "drive.dwell_high_s=0.3", "drive.dwell_low_s=0.3"]
 
@@ -120,6 +121,37 @@ def test_actuator_blocked_force_and_free_displacement_match_model(tmp_path):
             means = dwell_means(reader, "/camera/displacement", "displacement_m", V, start, end, margin_s=0.15)
             stroke = np.mean(means["high"]) - np.mean(means["low"])
             assert stroke == pytest.approx(2 * float(actuator.free_displacement_m(V)), rel=0.03)
+
+
+def test_contact_search_and_stiffness_sweep_take_up_stage_play(tmp_path):
+    # A stage with 20 um of play (carriage lags the motor by half of it in the direction of motion). The contact
+    # search approaches from one side only, so its zero is the motor position that just touches with the play
+    # taken up toward the tip: touch + play / 2. The sweep's loading branch then presses k_act x push, the
+    # unloading branch k_act x min(push + play, largest push) (the carriage stays put for the first `play` of the
+    # way back), and the blocked steps, reached from below after the sweep, press nothing extra.
+    play_m = 20e-6
+    out = tmp_path / "actuator-play.mcap"
+    result = run_protocol(RunRequest(protocol="actuator", out=out, layers=3, seed=3,
+                                     effects={"stage_backlash": play_m},
+                                     set_options=[*FAST, "repetitions=1", "voltages_V=200"]))
+    assert result.ok, result.reason
+    reader = RecordingReader(out, validate_crcs=True)
+    (contact,) = [e for e in reader.events() if e.kind == "contact_found"]
+    assert contact.data["stage_position_m"] == pytest.approx(BenchSettings().touch_stage_m + play_m / 2, abs=1e-6)
+    actuator = actuator_preset(3, "effective")
+    forces = reader.scalars("/force")
+    moves = reader.scalars("/stage/command")["time_s"]
+    largest_push = max(c["sag_m"] for c, _, _ in step_windows(reader) if c["mode"] == "stiffness")
+    for condition, start, end in step_windows(reader):
+        if condition["mode"] == "stiffness":
+            end = min(end, *moves[moves > start][:1])
+            sel = (forces["time_s"] > start) & (forces["time_s"] < end)
+            push = condition["sag_m"] if condition["direction"] == "up" else min(condition["sag_m"] + play_m,
+                                                                                largest_push)
+            assert np.mean(forces["force_N"][sel]) == pytest.approx(actuator.stiffness_N_per_m * push, abs=2e-3)
+        elif condition["mode"] == "blocked":
+            high = dwell_means(reader, "/force", "force_N", condition["voltage_V"], start, end)["high"]
+            assert np.mean(high) == pytest.approx(float(actuator.blocked_force_N(condition["voltage_V"])), abs=2e-3)
 
 
 @pytest.mark.parametrize("fixture, compliance_m_per_N", [("actuator", 1 / 2000.0), ("leg", 1 / 2000.0)])

@@ -50,10 +50,12 @@ def test_sweep_loads_then_unloads_past_contact_undriven_before_any_drive():
         assert i < first_drive
         volts = [m for m in msgs[:i] if isinstance(m, SetVoltages)]
         assert volts and volts[-1].bias_V == 0.0 and volts[-1].drive_V == 0.0
-    # back at zero sag before the blocked steps
+    # back at zero sag before the blocked steps, reached from below (past the stage's play, as the contact search
+    # leaves it), not coming down from the last push
     after = msgs.index(sweep[-1])
-    back = next(m for m in msgs[after:] if isinstance(m, MoveStage))
-    assert back.position_m == pytest.approx(ZERO_M)
+    first_blocked = msgs.index(next(s for s in steps if s.condition["mode"] == "blocked"))
+    back = [m.position_m for m in msgs[after:first_blocked] if isinstance(m, MoveStage)]
+    assert back == pytest.approx([ZERO_M - p.contact.clearance_m, ZERO_M])
 
 
 def test_zero_steps_means_no_sweep():

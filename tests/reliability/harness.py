@@ -155,10 +155,11 @@ def fault_time_s(spec: str) -> float:
 
 # Moments to inject a fault on the short protocols (rig clock, s): while the drive holds the actuator at high
 # voltage (stage still), and for `static` while the stage steps into the leg. Read off the event timelines of the
-# short runs (`hamr-bench info`): drive_start ~0.4 s (free-displacement), ~15.9 s (leg protocols, after the contact
-# search), ~87.4 s (actuator); static's loading steps run 16-21 s.
+# short runs (`hamr-bench info`, or `fault_moments` below): drive_start ~0.4 s (free-displacement), ~16.5 s (leg
+# protocols, after the contact search), ~99.4 s (actuator, after its stiffness sweep); static's loading steps
+# start at ~16.3 s.
 FAULT_AT_DRIVE_S: dict[str, float] = {
-    "actuator": 87.7, "blocked-force": 16.2, "sag-sweep": 16.2, "free-displacement": 0.7, "static": 17.5,
+    "actuator": 99.7, "blocked-force": 16.85, "sag-sweep": 16.85, "free-displacement": 0.7, "static": 17.5,
 }
 # ... and during the contact search, when the stage is stepping toward the leg or tip.
 FAULT_AT_SEARCH_S: dict[str, float] = {
