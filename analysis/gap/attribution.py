@@ -17,9 +17,10 @@ Decision rules (fixed before any benchmark, documented in docs/gap.md):
 - another candidate is confusable with the winner when their held-out errors differ by an amount whose bootstrap
   interval contains 0 (or by less than 10 %) AND their in-sample chi^2 (same number of parameters) differ by less than the 1 % point of
   chi^2(1) x over-dispersion: the winner's verdict is then `ambiguous` and `best` is null;
-- the strength interval is the union of the profile-likelihood interval and delete-a-group jackknife intervals
-  over condition folds and over phases within a cycle (t with K-1 degrees of freedom), and for a hallmark
-  candidate (creep) the interval of its strength from the dwell contrasts alone (a model-form term);
+- the strength interval (since the fifth run, `combine_ci`) adds, per side, the profile-likelihood half-width
+  (noise) and the excess of each delete-a-group jackknife half-width over it (condition folds and phases within
+  a cycle, t with K-1 degrees of freedom; model form) in quadrature, and for a hallmark candidate (creep) spans
+  the interval of its strength from the dwell contrasts alone (another estimator: a bias, so a union);
 - bootstrap intervals resample whole conditions within each experiment (run and mode).
 """
 
@@ -129,6 +130,31 @@ def jackknife_ci(s_hat: float, fold_strengths: Sequence[float]) -> list[float]:
     se = math.sqrt((k - 1) / k * float(np.sum((f - f.mean()) ** 2)))
     t = float(stats.t.ppf(0.975, k - 1))
     return [s_hat - t * se, s_hat + t * se]
+
+
+def combine_ci(s_hat: float, profile: Sequence[float], jackknives: Sequence[Sequence[float]],
+               estimator_cis: Sequence[Sequence[float]], bounds: tuple[float, float]) -> list[float]:
+    """The strength's 95 % interval from its terms (since the fifth run; before, the union of all of them).
+
+    Each side separately: the profile half-width p (noise, pure error scaled by the over-dispersion) and each
+    jackknife half-width j (t with K-1 dof about s_hat) are 95 % half-widths of error sources; a jackknife's
+    spread holds the noise too, so only its excess over the noise is a model-form term: h^2 = p^2 + sum over
+    jackknives of max(0, j^2 - p^2). Noise is counted once (adding all in quadrature would count it once per
+    jackknife); h equals the union's half-width when at most one jackknife exceeds the noise, and is wider when
+    both do (form errors across conditions and across phases add). `estimator_cis` (creep's dwell contrast) are
+    intervals of ANOTHER estimator of the same strength: their disagreement with s_hat is a bias fixed for the
+    data set, not a random error, so it is spanned (union), not added in quadrature. Clipped to `bounds`."""
+    lo_p, hi_p = s_hat - profile[0], profile[1] - s_hat
+    half = [0.5 * (j[1] - j[0]) for j in jackknives]
+
+    def side(p: float) -> float:
+        p = max(p, 0.0)
+        return math.sqrt(p * p + sum(max(0.0, j * j - p * p) for j in half))
+
+    lo, hi = s_hat - side(lo_p), s_hat + side(hi_p)
+    for c in estimator_cis:
+        lo, hi = min(lo, c[0]), max(hi, c[1])
+    return [max(bounds[0], lo), min(bounds[1], hi)]
 
 
 # Candidates defined by a time signature, with the (first, second) phases of a step whose difference carries it:
@@ -282,6 +308,17 @@ def _boot(cid: np.ndarray, stat, rng: np.random.Generator, n: int = N_BOOT,
     return np.asarray(out)
 
 
+def _has_sweep(p: Problem) -> bool:
+    return any(r.mode == "stiffness" for r in p.rows)
+
+
+def _winner_strengths(winner: str, singles: dict, pairs: dict) -> dict[str, float]:
+    if winner in singles:
+        return {winner: singles[winner]["strength"]}
+    a, b = winner.split("+")
+    return dict(zip((a, b), pairs[(a, b)]["strengths"]))
+
+
 def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence[str] | None = None,
              seed: int = 0) -> dict[str, Any]:
     """The whole diagnosis; returns the JSON-ready result (keys `where`, `ranking`, `best`, plus detail)."""
@@ -293,7 +330,11 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     n_nuis = p.n_nuisance([])
     nominal = res.global_test(p, z0, n_nuis)
     gap = nominal["p_value"] < GAP_ALPHA
-    where = res.regions(p, z0)
+    # The map of where the gap lies takes each run's offset from the rows no drive effect acts on (`offset_rows`);
+    # attribution fits it over all force rows, re-estimated under each promising candidate.
+    pm = Problem(data, fit_params, offsets_from_undriven=True) if _has_sweep(p) else p
+    zm, _ = pm.residual({})
+    where = res.regions(pm, zm)
     scr = screening.screen(p, z0, names)
 
     # fit every candidate alone (in-sample)
@@ -420,16 +461,14 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                     prof = strength_ci(views[key], key, v["strength"], v["chi2"], scale2)
                     jack = jackknife_ci(v["strength"], v.get("fold_strengths", []))
                     jack_ph = jackknife_ci(v["strength"], v.get("phase_strengths", []))
-                    parts = [prof, jack, jack_ph]
                     # creep only: its form mismatch is the same in every condition and nearly every phase, so no
                     # jackknife sees it; hysteresis' (play vs Bouc-Wen) differs between rise and fall, which the
                     # phase jackknife does see
                     dwell_ci = hallmark_ci(hallmarks.get(key)) if key == "creep" else None
                     if dwell_ci is not None:
-                        parts.append(dwell_ci)
                         entry["strength_ci95_dwell_contrast"] = dwell_ci
-                    lo_b, hi_b = _bounds(key)   # the union, within the candidate's physical range
-                    entry["strength_ci95"] = [max(lo_b, min(c[0] for c in parts)), min(hi_b, max(c[1] for c in parts))]
+                    entry["strength_ci95"] = combine_ci(v["strength"], prof, [jack, jack_ph],
+                                                        [dwell_ci] if dwell_ci is not None else [], _bounds(key))
                     entry["strength_ci95_profile"] = prof
                     entry["strength_ci95_condition_jackknife"] = jack
                     entry["strength_ci95_phase_jackknife"] = jack_ph
@@ -471,7 +510,12 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
         else:
             a, b = winner.split("+")
             z_after, _ = pairs[(a, b)]["view"].residual(dict(zip((a, b), pairs[(a, b)]["strengths"])))
-        after_regions = {(g.protocol, g.condition): g for g in res.regions(p, z_after)}
+        if pm is not p:
+            after = _winner_strengths(winner, singles, pairs)
+            z_after_map, _ = pm.relinearised(after).residual(after)
+        else:
+            z_after_map = z_after
+        after_regions = {(g.protocol, g.condition): g for g in res.regions(pm, z_after_map)}
         closes, leaves = [], []
         for g in where:
             if g.p_value >= res.ALPHA:
@@ -488,11 +532,11 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
         "best": best,
         "gap_above_noise": bool(gap),
         "nominal_lack_of_fit": nominal,
-        "phase_map": res.phase_map(p, z0),
+        "phase_map": res.phase_map(pm, zm),
         "screening": {n: v for n, v in scr["scores"].items()},
         "signature_cos": {f"{a}|{b}": c for (a, b), c in scr["cos"].items()},
         "sensor_lag_s": {f"{k[0]}/{k[1]}": v for k, v in p.lag.items()},
         "heldout_units": "noise units (z = residual / pure-error standard error)",
         "elapsed_s": time.perf_counter() - t_start,
-        "_problem": p,
+        "_problem": pm,
     }

@@ -24,9 +24,29 @@ LAG_STEP_S = 2e-3
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 
 
+def offset_rows(e: RunEngine, undriven_only: bool = False) -> np.ndarray:
+    """The rows a run's zero offset (contact shift and its linear column) is identified from: its force rows; with
+    `undriven_only`, when the run has an undriven stiffness sweep (two or more pushes), those holds alone.
+
+    Attribution uses all force rows: the offset and the effects that act on the sweep (a sensor spring scales its
+    forces, a play shifts its loading branch) are then not identified from the same eight holds (from the holds
+    alone, sensor-compliance strengths came out 4-10 % low and small plays were missed; docs/gap.md, fifth run).
+    The residual map (`where`) uses the holds alone: no drive effect acts on them, and fitted over the driven rows
+    too, a drive effect's misfit of the blocked force moves the contact (~7-11 um with hysteresis 0.12) and paints
+    its gap on the sweep, where data and model agree."""
+    force = e.is_force_row
+    if not undriven_only:
+        return force
+    holds = force & np.array([r.mode == "stiffness" for r in e.rows], dtype=bool)
+    if np.unique([r.sag_m for r, h in zip(e.rows, holds) if h]).size >= 2:
+        return holds
+    return force
+
+
 class Problem:
-    def __init__(self, data: GapData, fit_params: dict | None = None) -> None:
+    def __init__(self, data: GapData, fit_params: dict | None = None, offsets_from_undriven: bool = False) -> None:
         self.data = data
+        self.offsets_from_undriven = offsets_from_undriven  # see `offset_rows`: the residual map's view
         self.engines = [RunEngine(run, fit_params) for run in data.runs]
         self.rows = data.rows
         self.y = np.array([r.value for r in self.rows])
@@ -68,10 +88,10 @@ class Problem:
     def _fit_contact_shifts(self, strengths: dict[str, float] | None = None) -> None:
         """Per run with a contact search, where the sensor surface really sits relative to the search's zero: the
         nonlinear form of the run's offset nuisance (h0 for a leg, f0 = -k_act x0 for the actuator), which the
-        linear offset column is then taken about. The search's zero can be far off: on the stiff bare actuator a
-        stage with play b shows a force plateau while backing off (the carriage stays put for the first b), which
-        misplaces the extrapolated zero by up to ~b; on a leg a drifting force baseline moves the threshold
-        crossing. Rows this leaves out of contact read 0 (a leg at low voltage may not reach the sensor at all),
+        linear offset column is then taken about, both from `offset_rows`. The search's zero can be far off: on a
+        leg a drifting force baseline moves the threshold crossing; and recordings made before the runner's search
+        approached from one side only (third session) have it misplaced by up to a stage's play on the stiff bare
+        actuator. Rows this leaves out of contact read 0 (a leg at low voltage may not reach the sensor at all),
         which an offset linearised at the search's zero cannot reach. With `sensor_drift` in `strengths`, each
         run's drift baseline is fitted along (projected out)."""
         strengths = strengths or {}
@@ -79,7 +99,7 @@ class Problem:
         for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
             if not e.has_offset():
                 continue
-            force = e.is_force_row
+            force = offset_rows(e, self.offsets_from_undriven)
             y, sig = self.y[sl][force], self.sigma[sl][force]
             lag = self._run_lag(e)
             basis = e.drift_columns()[force] / sig[:, None] if drift else np.zeros((int(force.sum()), 0))
@@ -113,7 +133,7 @@ class Problem:
             x0 = self.contact_shift.get(k, 0.0)
             col = np.zeros(self.y.size)
             col[sl] = (e.predict({}, lag, step, x0) - e.predict({}, lag, -step, x0)) / (2 * step)
-            col[sl] = np.where(e.is_force_row, col[sl], 0.0)
+            col[sl] = np.where(offset_rows(e, self.offsets_from_undriven), col[sl], 0.0)
             if np.any(col):
                 cols.append(col / self.sigma)
         # Timing lag of each sensor chain, linearised about the nominal estimate: the nominal fit alone would let

@@ -142,7 +142,8 @@ def write_report(result: dict, out_dir: Path) -> Path:
     strengths = _best_strengths(result)
     label = " + ".join(f"{k} {v:.3g}" for k, v in strengths.items()) or "no candidate"
     fit0, z0 = _fitted(problem, {})
-    fit1, z1 = _fitted(problem, strengths) if strengths else (fit0, z0)
+    # under the winner the run offsets are re-estimated (they depend on effects that act on the undriven rows)
+    fit1, z1 = _fitted(problem.relinearised(strengths), strengths) if strengths else (fit0, z0)
     residual_map_png(problem, z0, z1, label, out_dir / "residual_map.png")
     overlays_png(problem, fit0, fit1, label, out_dir / "overlays.png")
     ranking_png(result, out_dir / "ranking.png")

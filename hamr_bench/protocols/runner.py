@@ -238,6 +238,14 @@ class Runner:
         start = self.rig.stage.position_m()
         position = start
         force = self._mean_force(FORCE_WINDOW_S)
+        if force >= msg.threshold_N / 2:
+            # The tare just before assumed nothing touches here. A sensor that reads half the threshold anyway (a
+            # tare that did not take, a sensor already pressed) would see contact everywhere and put the zero
+            # anywhere: refuse rather than record a wrong zero.
+            raise DeviceError(
+                f"the force sensor reads {force * 1e3:.3f} mN where the contact search starts, right after its tare "
+                f"(expected ~0, out of contact; the threshold is {msg.threshold_N * 1e3:.2f} mN): check that nothing "
+                "touches the sensor and that its tare takes", device="force_sensor")
         while force < msg.threshold_N:
             if abs(position - start) >= msg.max_travel_m:
                 raise DeviceError(

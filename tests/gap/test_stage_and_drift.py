@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from analysis.gap.attribution import diagnose, hallmark_ci, phase_groups
+from analysis.gap.attribution import combine_ci, diagnose, hallmark_ci, phase_groups
 from analysis.gap.features import load_gap_data
 from analysis.gap.library import DRIFT_KNOT_S
 from analysis.gap.problem import Problem
@@ -70,6 +70,36 @@ def test_dwell_contrast_interval_joins_only_when_it_applies():
     assert (hi - lo) / 2 == pytest.approx(0.001 * 2.086, rel=1e-3)     # t(0.975, 20)
     assert hallmark_ci({**h, "applicable": False}) is None
     assert hallmark_ci(None) is None and hallmark_ci({"n_pairs": 0, "applicable": False}) is None
+
+
+def test_interval_terms_add_noise_once_and_form_excess_in_quadrature():
+    wide = (-1.0, 1.0)
+    # jackknives within the noise: the profile interval (asymmetric sides kept)
+    assert combine_ci(0.0, [-0.3, 0.2], [[-0.1, 0.1], [-0.15, 0.15]], [], wide) == pytest.approx([-0.3, 0.2])
+    # one jackknife beyond the noise: its half-width (the union's)
+    assert combine_ci(0.0, [-0.3, 0.3], [[-0.5, 0.5], [-0.1, 0.1]], [], wide) == pytest.approx([-0.5, 0.5])
+    # no noise: the two form terms add in quadrature, 3-4-5
+    assert combine_ci(0.0, [0.0, 0.0], [[-0.3, 0.3], [-0.4, 0.4]], [], wide) == pytest.approx([-0.5, 0.5])
+    # another estimator's interval is spanned, not added; then clipped to the physical range
+    assert combine_ci(0.0, [-0.1, 0.1], [], [[0.05, 0.7]], wide) == pytest.approx([-0.1, 0.7])
+    assert combine_ci(0.0, [-0.1, 0.1], [], [[0.05, 1.7]], (-0.05, 1.0)) == pytest.approx([-0.05, 1.0])
+
+
+def test_interval_combination_covers_95_percent_when_each_term_is_its_error_source():
+    """Independent noise (sd 1), a condition-form error (sd 1.5) and a phase-form error (sd 1): each jackknife's
+    spread holds the noise plus its own form error. With the terms' true 95 % half-widths the combination covers
+    95 %; the union of the same intervals covers less, all three in quadrature more (noise counted thrice)."""
+    rng = np.random.default_rng(3)
+    n, z = 40_000, 1.959964
+    err = rng.normal(0, 1, n) + rng.normal(0, 1.5, n) + rng.normal(0, 1.0, n)
+    prof = [-z, z]
+    jacks = [[-z * math.hypot(1, 1.5), z * math.hypot(1, 1.5)], [-z * math.sqrt(2), z * math.sqrt(2)]]
+    lo, hi = combine_ci(0.0, prof, jacks, [], (-math.inf, math.inf))
+    coverage = np.mean((err >= lo) & (err <= hi))
+    assert coverage == pytest.approx(0.95, abs=0.005)
+    union = z * math.hypot(1, 1.5)
+    assert np.mean(np.abs(err) <= union) < 0.93
+    assert np.mean(np.abs(err) <= z * math.sqrt(1 + (1 + 1.5 ** 2) + 2)) > 0.97
 
 
 def test_drift_baseline_knots(tmp_path):

@@ -43,6 +43,17 @@ def test_contact_search_finds_zero_sag_within_one_fine_step():
     assert abs(found[0] - rig.force_sensor.touch_m) <= params.fine_step_m + params.threshold_N / 4 / 2.0
 
 
+def test_contact_search_refuses_a_sensor_that_reads_force_out_of_contact():
+    # Right after its tare, where the search starts, the sensor reads 0.25 mN (over half the 0.4 mN threshold): a
+    # tare that did not take. The search would see contact everywhere; it must stop with one clear line instead of
+    # recording a wrong zero, and leave the rig safe.
+    rig = fake_rig(baseline_N=0.25e-3)
+    result, rec = run("blocked-force", rig)
+    assert not result.ok and "where the contact search starts" in result.reason and "\n" not in result.reason
+    assert not [e for e in rec.events if e[1] == "contact_found"]
+    assert rig.amp_drive.zeroed and rig.amp_bias.zeroed and rig.stage.stopped
+
+
 def test_drive_waveform_is_recorded_as_commanded_samples():
     rig = fake_rig()
     result, rec = run("blocked-force", rig, ["repetitions=1", "drive.cycles=1", "voltages_V=200"])
