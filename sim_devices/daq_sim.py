@@ -139,6 +139,21 @@ class _AoChannel:
     tripped_at_s: float | None = None
 
 
+
+def _segment_output(seg: _Segment, t: np.ndarray, tau_s: float) -> np.ndarray:
+    """Output at times `t` that all fall in segment `seg`: each sample's target, approached from the output at that
+    sample's update time with the amplifier's time constant `tau_s` (held when `tau_s` is 0)."""
+    if math.isfinite(seg.dt_s):
+        k = np.clip(((t - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
+        tk = seg.t0_s + k * seg.dt_s
+    else:
+        k = np.zeros(t.shape, dtype=int)
+        tk = np.full(t.shape, seg.t0_s)
+    target = seg.target_V[k]
+    if tau_s > 0:
+        return target + (seg.y_V[k] - target) * np.exp(-(t - tk) / tau_s)
+    return target
+
 class SimDaq:
     """A simulated DAQ device with HV amplifiers and an optional Nano17 attached (surface: `DaqBackend`)."""
 
@@ -322,43 +337,21 @@ class SimDaq:
             lo = bisect.bisect_right(ch.starts_s, float(t.min())) - 1
             if lo >= 0 and bisect.bisect_right(ch.starts_s, float(t.max())) - 1 == lo:
                 # every time in one segment (a monitor read): the loop below without its index bookkeeping
-                seg = ch.segments[lo]
-                if math.isfinite(seg.dt_s):
-                    k = np.clip(((t - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
-                    tk = seg.t0_s + k * seg.dt_s
-                else:
-                    k = np.zeros(t.shape, dtype=int)
-                    tk = np.full(t.shape, seg.t0_s)
-                target, yk = seg.target_V[k], seg.y_V[k]
-                out = target + (yk - target) * np.exp(-(t - tk) / ch.tau_s)
+                out = _segment_output(ch.segments[lo], t, ch.tau_s)
                 if apply_trip and ch.tripped_at_s is not None:
                     out[t >= ch.tripped_at_s] = 0.0
                 return out
         out = np.zeros_like(t, dtype=float)
         if ch.segments and t.size:
-            if t.size == 1:  # the bench's usual question: no array conversion of the whole history
-                idx = np.array([bisect.bisect_right(ch.starts_s, float(t[0])) - 1])
-            else:
-                # Only the segments between the first and last time asked matter: converting the whole history
-                # (tens of thousands of ramp steps) to an array on every monitor read dominated the bench's cost.
-                lo = max(bisect.bisect_right(ch.starts_s, float(t.min())) - 1, 0)
-                hi = bisect.bisect_right(ch.starts_s, float(t.max()))
-                idx = np.searchsorted(np.asarray(ch.starts_s[lo:hi]), t, side="right") - 1 + lo
+            # Only the segments between the first and last time asked matter: converting the whole history (tens
+            # of thousands of ramp steps) to an array on every monitor read dominated the bench's cost. (One time
+            # alone took the scalar path above.)
+            lo = max(bisect.bisect_right(ch.starts_s, float(t.min())) - 1, 0)
+            hi = bisect.bisect_right(ch.starts_s, float(t.max()))
+            idx = np.searchsorted(np.asarray(ch.starts_s[lo:hi]), t, side="right") - 1 + lo
             for i in np.unique(idx[idx >= 0]):
                 sel = idx == i
-                seg = ch.segments[i]
-                ts = t[sel]
-                if math.isfinite(seg.dt_s):
-                    k = np.clip(((ts - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
-                    tk = seg.t0_s + k * seg.dt_s
-                else:
-                    k = np.zeros(ts.shape, dtype=int)
-                    tk = np.full(ts.shape, seg.t0_s)
-                target, yk = seg.target_V[k], seg.y_V[k]
-                if ch.tau_s > 0:
-                    out[sel] = target + (yk - target) * np.exp(-(ts - tk) / ch.tau_s)
-                else:
-                    out[sel] = target
+                out[sel] = _segment_output(ch.segments[i], t[sel], ch.tau_s)
         if apply_trip and ch.tripped_at_s is not None:
             out[t >= ch.tripped_at_s] = 0.0
         return out

@@ -505,14 +505,12 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                 e["verdict"] = "ambiguous" if ok else "unexplained"
                 e["confusable_with"] = [winner]
         # regions the winner closes / leaves
-        if winner in singles:
-            z_after, _ = views[winner].residual({winner: singles[winner]["strength"]})
-        else:
-            a, b = winner.split("+")
-            z_after, _ = pairs[(a, b)]["view"].residual(dict(zip((a, b), pairs[(a, b)]["strengths"])))
+        after = _winner_strengths(winner, singles, pairs)
+        view = views[winner] if winner in singles else pairs[tuple(winner.split("+"))]["view"]
+        z_after, _ = view.residual(after)
         if pm is not p:
-            after = _winner_strengths(winner, singles, pairs)
-            z_after_map, _ = pm.relinearised(after).residual(after)
+            map_after = pm.relinearised(after)
+            z_after_map, _ = map_after.residual(after)
         else:
             z_after_map = z_after
         after_regions = {(g.protocol, g.condition): g for g in res.regions(pm, z_after_map)}
