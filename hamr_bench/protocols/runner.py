@@ -103,10 +103,12 @@ class Runner:
             status, reason = "failed", f"internal error: {type(exc).__name__}: {exc}"
             self._finish(status, reason)
             raise
-        self._finish(status, reason)
+        status, reason = self._finish(status, reason)
         return RunResult(status, reason, self.steps_done)
 
-    def _finish(self, status: str, reason: str) -> None:
+    def _finish(self, status: str, reason: str) -> tuple[str, str]:
+        """Make the rig safe and close the recording; returns the run's final (status, reason): a run that
+        completed but could not be made safe has failed."""
         if status != "success":
             # Closing a faulted rig fails the same way the run did; the reason recorded here is the message.
             self.rig.faulted = True
@@ -121,6 +123,7 @@ class Runner:
             pass
         self.rec.close(status, reason)
         self.progress.close(completed=status == "success")
+        return status, reason
 
     def make_safe(self) -> list[str]:
         """0 V on both channels (drive first), stage stopped, stream stopped. Each device is tried even if another

@@ -54,6 +54,20 @@ def test_contact_search_refuses_a_sensor_that_reads_force_out_of_contact():
     assert rig.amp_drive.zeroed and rig.amp_bias.zeroed and rig.stage.stopped
 
 
+def test_a_run_that_completes_but_cannot_be_made_safe_has_failed():
+    # The protocol completes, then stopping the force stream fails (a sensor gone bad at the very end). The
+    # recording and the result returned to the caller (the CLI's exit code) must both say failed, with the reason.
+    rig = fake_rig()
+
+    def stop_stream():
+        raise DeviceFault("fake sensor: unreadable reply", device="force_sensor")
+
+    rig.force_sensor.stop_stream = stop_stream
+    result, rec = run("blocked-force", rig, ["repetitions=1", "drive.cycles=1", "voltages_V=200"])
+    assert rec.closed[0] == "failed" and "while making safe" in rec.closed[1]
+    assert not result.ok and result.exit_status == "failed" and "while making safe" in result.reason
+
+
 def test_drive_waveform_is_recorded_as_commanded_samples():
     rig = fake_rig()
     result, rec = run("blocked-force", rig, ["repetitions=1", "drive.cycles=1", "voltages_V=200"])
