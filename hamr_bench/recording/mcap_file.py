@@ -7,9 +7,10 @@ compression (camera frames are stored, scalars compressed) through a documented 
 attribute of another library's class. Reading stays with the `mcap` package (and `scan.py` for recovery), so every
 file this module writes is checked by an independent implementation in the tests.
 
-Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records inside the
-chunk in progress when they are registered (so a truncated file still describes its channels), Chunks each followed
-by one MessageIndex per channel, Metadata records between chunks; DataEnd with the CRC of the data section; the
+Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records as they
+are registered (outside chunks, so a truncated file still describes its channels), Chunks each followed by one
+MessageIndex per channel (one chunk is open per compression, so chunks of frames and of scalars interleave and may
+overlap in time; within a channel, file order is time order), Metadata records between chunks; DataEnd with the CRC of the data section; the
 summary section: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes, SummaryOffsets; Footer with the
 summary CRC; magic. All CRCs are written (chunk, data section, summary).
 """
@@ -86,7 +87,7 @@ class McapFileWriter:
         self.compression = compression
         self._pos = 0
         self._data_crc = 0
-        self._chunk: _Chunk | None = None
+        self._open: dict[str, _Chunk] = {}  # the chunk in progress per compression, in the order they opened
         self._schemas: list[bytes] = []  # their records, for the summary
         self._channels: list[bytes] = []
         self._chunk_indexes: list[bytes] = []
@@ -107,28 +108,16 @@ class McapFileWriter:
         self._write(_record(OP_HEADER, _string(profile) + _string(library)))
 
     # ------------------------------------------------------------------ registration
-    def _open_chunk(self, compression: str) -> _Chunk:
-        chunk = self._chunk
-        if chunk is not None and chunk.compression != compression and chunk.messages:
-            self.close_chunk()
-            chunk = None
-        if chunk is None:
-            chunk = self._chunk = _Chunk(compression)
-        elif not chunk.messages:
-            chunk.compression = compression  # only schemas/channels so far: they go in whichever chunk opens
-        return chunk
-
-    def _add_to_chunk(self, record: bytes) -> None:
-        chunk = self._chunk if self._chunk is not None else self._open_chunk(self.compression)
-        chunk.parts.append(record)
-        chunk.size += len(record)
-
+    # Schema and Channel records go straight into the data section, outside any chunk: with a chunk open per
+    # compression, a definition inside one chunk could reach the file after a message of its channel in another.
+    # Written at once, a definition precedes every message of its channel, so a truncated file still describes
+    # its channels.
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         schema_id = len(self._schemas) + 1
         record = _record(OP_SCHEMA, struct.pack("<H", schema_id) + _string(name) + _string(encoding)
                          + struct.pack("<I", len(data)) + bytes(data))
         self._schemas.append(record)
-        self._add_to_chunk(record)
+        self._write(record)
         return schema_id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
@@ -138,19 +127,20 @@ class McapFileWriter:
                          + _string(message_encoding) + _string_map(metadata or {}))
         self._channels.append(record)
         self._channel_counts[channel_id] = 0
-        self._add_to_chunk(record)
+        self._write(record)
         return channel_id
 
     # ------------------------------------------------------------------ messages
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int | None = None,
                     sequence: int = 0, compression: str | None = None) -> None:
-        """One message into the chunk in progress. `compression` (default: the file's) is the chunk's: a message
-        asking for another closes the chunk in progress first, so e.g. a camera frame can sit in a stored chunk
-        between compressed chunks of scalars."""
+        """One message into the open chunk of its compression (default: the file's). One chunk is open per
+        compression, so camera frames fill stored chunks of their own while scalars fill compressed ones: a frame
+        no longer cuts the scalars' chunk short (with one chunk at a time, every frame of a camera run closed two
+        chunks, each with its index records)."""
         wanted = self.compression if compression is None else compression
-        chunk = self._chunk
-        if chunk is None or (chunk.compression != wanted):
-            chunk = self._open_chunk(wanted)
+        chunk = self._open.get(wanted)
+        if chunk is None:
+            chunk = self._open[wanted] = _Chunk(wanted)
         head = _MESSAGE_HEAD.pack(OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence, log_time,
                                   log_time if publish_time is None else publish_time)
         entries = chunk.index.get(channel_id)
@@ -171,14 +161,15 @@ class McapFileWriter:
         chunk.messages += 1
         self._channel_counts[channel_id] += 1
         if chunk.size > self._chunk_size:
-            self.close_chunk()
+            self._close(chunk)
 
     def close_chunk(self) -> None:
-        """Write the chunk in progress (if it holds a message) and its message indexes."""
-        chunk = self._chunk
-        if chunk is None or not chunk.messages:
-            return
-        self._chunk = None
+        """Write every open chunk (oldest first) and its message indexes."""
+        for chunk in list(self._open.values()):
+            self._close(chunk)
+
+    def _close(self, chunk: _Chunk) -> None:
+        del self._open[chunk.compression]
         data = b"".join(chunk.parts)
         stored = _compress(data, chunk.compression)
         body = (struct.pack("<QQQI", chunk.start_ns, chunk.end_ns, len(data), zlib.crc32(data))

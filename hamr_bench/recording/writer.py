@@ -579,7 +579,7 @@ class Recorder:
     def _add_stored_image(self, channel_id: int, log_ns: int, payload: bytes) -> None:
         """One frame in a stored (uncompressed) chunk: LZ4 costs more than twice the rest of writing a 640x480 frame
         and, camera noise being incompressible, saves under 20 % of its size (frames are already PNG). The chunk
-        keeps its CRC; the compressed chunk of scalars before it is closed first."""
+        keeps its CRC."""
         self._writer.add_message(channel_id, log_ns, payload, log_ns, 0, compression="")
 
     def _sync(self) -> None:
