@@ -1,7 +1,9 @@
 """Reading a hamr-bench recording back: metadata, topics, scalar streams as numpy arrays, events, images, traffic.
 
 The whole data section is scanned once when the reader opens (validating every chunk CRC, the data-section CRC and
-the summary CRC unless `validate_crcs=False`). Scalars, events and traffic are kept in memory (tens of MB for an
+the summary CRC unless `validate_crcs=False`). Chunks whose message indexes check out are taken in per-channel
+numpy blocks (`index_scan.py`), the others record by record; a stream keeps both kinds of block in file order and
+joins them when asked, so both ways give the same answers. Scalars, events and traffic are kept in memory (tens of MB for an
 hour at 10 kHz); images stay on disk and are fetched chunk by chunk when iterated. A file without a footer (a
 killed writer) is read up to its last complete record with a `RecordingWarning`; a damaged file raises
 `RecordingError` naming the file and the byte at fault.
@@ -20,6 +22,17 @@ import numpy as np
 
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
+from hamr_bench.recording.index_scan import (
+    SMALL_CHUNK,
+    BATCH_BYTES,
+    ChunkCandidate,
+    ChunkMessages,
+    IndexBatch,
+    check_small,
+    scan_indexed,
+    split_chunk,
+    walk_chunk,
+)
 from hamr_bench.recording.scan import (
     ChannelRecord,
     MessageRecord,
@@ -92,50 +105,101 @@ class Traffic:
 
 
 class _Stream:
-    __slots__ = ("log_times", "payloads", "chunk_offsets", "count")
+    """One channel's messages in file order, as blocks: Python lists filled record by record, or the numpy arrays of
+    an indexed chunk (log times int64; payloads an (n, size) uint8 array when all have one size). Lazy (image)
+    streams keep no payloads, only the offsets of the chunks that hold them."""
 
-    def __init__(self) -> None:
-        self.log_times: list[int] = []
-        self.payloads: list[bytes] = []
+    __slots__ = ("lazy", "time_blocks", "payload_blocks", "chunk_offsets", "count", "_times", "_payloads")
+
+    def __init__(self, lazy: bool = False) -> None:
+        self.lazy = lazy
+        self.time_blocks: list[list[int] | np.ndarray] = []
+        self.payload_blocks: list[list[bytes] | np.ndarray] = []
         self.chunk_offsets: list[int] = []
         self.count = 0
+        self._times: list[int] | None = None  # the list block being filled record by record, if the last is one
+        self._payloads: list[bytes] | None = None
+
+    def add_record(self, log_time: int, payload: bytes) -> None:
+        if self._times is None:
+            self._times = []
+            self.time_blocks.append(self._times)
+            if not self.lazy:
+                self._payloads = []
+                self.payload_blocks.append(self._payloads)
+        self._times.append(log_time)
+        if self._payloads is not None:
+            self._payloads.append(payload)
+        self.count += 1
+
+    def add_block(self, log_times: np.ndarray, payloads: np.ndarray | list[bytes] | None) -> None:
+        self._times = self._payloads = None
+        self.time_blocks.append(log_times)
+        if payloads is not None:
+            self.payload_blocks.append(payloads)
+        self.count += len(log_times)
+
+    def add_chunk_offset(self, chunk_offset: int) -> None:
+        if not self.chunk_offsets or self.chunk_offsets[-1] != chunk_offset:
+            self.chunk_offsets.append(chunk_offset)
+
+    def first_last_ns(self) -> tuple[int, int] | None:
+        """Smallest and largest log time (Python ints, as the record path always gave), None if no message."""
+        lows = [int(b.min()) if isinstance(b, np.ndarray) else min(b) for b in self.time_blocks if len(b)]
+        highs = [int(b.max()) if isinstance(b, np.ndarray) else max(b) for b in self.time_blocks if len(b)]
+        return (min(lows), max(highs)) if lows else None
+
+    def log_times(self) -> np.ndarray:
+        # np.asarray on a list block raises OverflowError past int64 as before; indexed blocks never hold such times.
+        if not self.time_blocks:
+            return np.asarray([], dtype=np.int64)
+        return np.concatenate([np.asarray(b, dtype=np.int64) for b in self.time_blocks])
+
+    def payloads(self) -> list[bytes]:
+        out: list[bytes] = []
+        for block in self.payload_blocks:
+            if isinstance(block, np.ndarray):
+                out.extend(row.tobytes() for row in block)
+            else:
+                out.extend(block)
+        return out
+
+    def payload_matrix(self, size: int) -> np.ndarray | None:
+        """All payloads as one (n, size) uint8 array if every one is `size` bytes long, else None."""
+        parts = []
+        for block in self.payload_blocks:
+            if isinstance(block, np.ndarray):
+                if block.shape[1] != size:
+                    return None
+                parts.append(block)
+            else:
+                if not all(len(p) == size for p in block):
+                    return None
+                parts.append(np.frombuffer(b"".join(block), dtype=np.uint8).reshape(-1, size))
+        if not parts:
+            return np.empty((0, size), dtype=np.uint8)
+        return np.ascontiguousarray(np.concatenate(parts) if len(parts) > 1 else parts[0])
+
+
+class _Reread(Exception):
+    """A chunk the index path could not take does not parse record by record either: read the file again the plain
+    way, so that the outcome (error, or partial read) is exactly the plain scan's."""
 
 
 class RecordingReader:
     """Opens and scans `path` at once; raises RecordingError if it cannot be read."""
 
-    def __init__(self, path: Path | str, validate_crcs: bool = True) -> None:
+    def __init__(self, path: Path | str, validate_crcs: bool = True, use_message_indexes: bool = True) -> None:
+        """`use_message_indexes=False` reads every chunk record by record (the reference the indexed path is
+        tested and benchmarked against); the results are the same either way."""
         self.path = Path(path)
         self.validate_crcs = validate_crcs
-        self.status = ScanStatus()
-        self._schemas: dict[int, SchemaRecord] = {}
-        self._channels: dict[int, ChannelRecord] = {}
-        self._metadata: dict[str, dict[str, str]] = {}
-        self._streams: dict[int, _Stream] = {}
-        self.orphan_messages = 0  # messages whose channel record was lost
-        lazy: dict[int, bool] = {}
-        for record in scan(self.path, "strict" if validate_crcs else "lenient", self.status):
-            if isinstance(record, MessageRecord):
-                stream = self._streams.get(record.channel_id)
-                if stream is None:
-                    if record.channel_id not in self._channels:
-                        self.orphan_messages += 1
-                        continue
-                    stream = self._streams[record.channel_id] = _Stream()
-                    lazy[record.channel_id] = self._schema_name(record.channel_id) in _LAZY_SCHEMAS
-                stream.log_times.append(record.log_time)
-                stream.count += 1
-                if lazy[record.channel_id]:
-                    if not stream.chunk_offsets or stream.chunk_offsets[-1] != record.chunk_offset:
-                        stream.chunk_offsets.append(record.chunk_offset)
-                else:
-                    stream.payloads.append(record.data)
-            elif isinstance(record, ChannelRecord):
-                self._channels[record.id] = record
-            elif isinstance(record, SchemaRecord):
-                self._schemas[record.id] = record
-            elif isinstance(record, MetadataRecord):
-                self._metadata[record.name] = record.values
+        self._reset()
+        try:
+            self._load(use_message_indexes)
+        except _Reread:
+            self._reset()
+            self._load(False)
         self._by_topic = {c.topic: c for c in self._channels.values()}
         self.start_time_ns = self._start_time_ns()
         if self.partial:
@@ -147,6 +211,120 @@ class RecordingReader:
                 RecordingWarning,
                 stacklevel=2,
             )
+
+    # ------------------------------------------------------------------ loading
+
+    def _reset(self) -> None:
+        self.status = ScanStatus()
+        self._schemas: dict[int, SchemaRecord] = {}
+        self._channels: dict[int, ChannelRecord] = {}
+        self._metadata: dict[str, dict[str, str]] = {}
+        self._streams: dict[int, _Stream] = {}
+        self.orphan_messages = 0  # messages whose channel record was lost
+        self.chunks_indexed = 0  # chunks whose messages were taken through their message indexes
+
+    def _load(self, indexed: bool) -> None:
+        policy = "strict" if self.validate_crcs else "lenient"
+        if not indexed:
+            for record in scan(self.path, policy, self.status):
+                self._take(record)
+            return
+        # Indexed chunks wait in `batch`; it is emptied, in file order, before anything that could change how a
+        # later message is taken (a schema, a channel, a message outside the batch) and at the end.
+        batch = IndexBatch()
+        try:
+            for record in scan_indexed(self.path, policy, self.status):
+                if isinstance(record, ChunkCandidate):
+                    self._add_chunk(batch, record)
+                    continue
+                if len(batch) and not isinstance(record, MetadataRecord):
+                    self._drain(batch)
+                self._take(record)
+        except RecordingError:
+            # The plain scan would have walked the waiting chunks before failing here: if one of them does not
+            # pass, that walk might have failed first, with another message.
+            if len(batch) and not batch.all_pass():
+                raise _Reread from None
+            raise
+        if len(batch):
+            self._drain(batch)
+
+    def _add_chunk(self, batch: IndexBatch, chunk: ChunkCandidate) -> None:
+        streams = [self._streams.get(channel_id) for channel_id in chunk.index_channels]
+        if all(stream is not None for stream in streams):
+            # Every channel already has a stream: taking this chunk later changes nothing in between.
+            if chunk.count > SMALL_CHUNK or not all(stream.lazy for stream in streams):  # type: ignore[union-attr]
+                batch.add(chunk)
+                if batch.held_bytes > BATCH_BYTES:
+                    self._drain(batch)
+                return
+            messages = check_small(chunk)
+            if messages is not None:
+                batch.add_checked(chunk.chunk_offset, messages)
+                return
+        if len(batch):
+            self._drain(batch)
+        self._take_chunk(chunk)
+
+    def _drain(self, batch: IndexBatch) -> None:
+        for kind, value in batch.take():
+            if kind == "chunk":
+                self._take_chunk(value)
+                continue
+            runs, chunks = value
+            self.chunks_indexed += chunks
+            for run in runs:
+                stream = self._streams[run.channel_id]
+                if stream.lazy:
+                    stream.add_block(run.log_times, None)
+                    offsets = run.chunk_offsets
+                    for offset in offsets[np.concatenate(([True], offsets[1:] != offsets[:-1]))].tolist():
+                        stream.add_chunk_offset(offset)
+                else:
+                    stream.add_block(run.log_times, run.payloads())
+
+    def _take_chunk(self, chunk: ChunkCandidate) -> None:
+        """One chunk on its own, in its place: through its indexes if they check out, else record by record."""
+        records = split_chunk(chunk)
+        if records is None:
+            records = walk_chunk(chunk)
+            if records is None:
+                raise _Reread
+        else:
+            self.chunks_indexed += 1
+        for record in records:
+            self._take(record)
+
+    def _take(self, record: object) -> None:
+        if isinstance(record, MessageRecord):
+            stream = self._streams.get(record.channel_id)
+            if stream is None:
+                if record.channel_id not in self._channels:
+                    self.orphan_messages += 1
+                    return
+                stream = self._new_stream(record.channel_id)
+            stream.add_record(record.log_time, record.data)
+            if stream.lazy:
+                stream.add_chunk_offset(record.chunk_offset)
+        elif isinstance(record, ChunkMessages):
+            for channel_id, log_times, starts, ends in record.channels:
+                stream = self._streams.get(channel_id)
+                if stream is None:
+                    if channel_id not in self._channels:
+                        self.orphan_messages += len(log_times)
+                        continue
+                    stream = self._new_stream(channel_id)
+                if stream.lazy:
+                    stream.add_block(log_times, None)
+                    stream.add_chunk_offset(record.chunk_offset)
+                else:
+                    stream.add_block(log_times, record.payloads(starts, ends))
+        elif isinstance(record, ChannelRecord):
+            self._channels[record.id] = record
+        elif isinstance(record, SchemaRecord):
+            self._schemas[record.id] = record
+        elif isinstance(record, MetadataRecord):
+            self._metadata[record.name] = record.values
 
     # ------------------------------------------------------------------ whole-file facts
 
@@ -173,16 +351,17 @@ class RecordingReader:
             stream = self._streams.get(channel_id)
             count = stream.count if stream else 0
             first = last = None
-            if stream and stream.log_times:
-                first = self._to_time_s(min(stream.log_times))
-                last = self._to_time_s(max(stream.log_times))
+            span = stream.first_last_ns() if stream else None
+            if span is not None:
+                first = self._to_time_s(span[0])
+                last = self._to_time_s(span[1])
             out[channel.topic] = TopicInfo(channel.topic, self._schema_name(channel_id), count, first, last)
         return out
 
     def log_times_s(self, topic: str) -> np.ndarray:
         """MCAP log_time of each message on `topic`, as seconds since the run start."""
         stream = self._stream(topic)
-        return (np.asarray(stream.log_times, dtype=np.int64) - self.start_time_ns) / 1e9
+        return (stream.log_times() - self.start_time_ns) / 1e9
 
     # ------------------------------------------------------------------ streams
 
@@ -199,20 +378,21 @@ class RecordingReader:
             raise RecordingError(
                 f"{self.path}: topic {topic} is not a scalar stream (schema {self._schema_name(channel.id)})"
             )
-        payloads = self._streams[channel.id].payloads if channel.id in self._streams else []
+        stream = self._streams.get(channel.id) or _Stream()
         names = ("time_s", *fields)
         spec = schemas.ScalarSchema("", tuple(fields))
         # The fixed wire layout of a flat all-double message: tag byte then 8-byte double, per field.
         dtype = np.dtype([item for i, name in enumerate(names) for item in ((f"_tag{i}", "u1"), (name, "<f8"))])
-        if all(len(p) == dtype.itemsize for p in payloads):
-            packed = np.frombuffer(b"".join(payloads), dtype=dtype)
+        matrix = stream.payload_matrix(dtype.itemsize)
+        if matrix is not None:
+            packed = matrix.reshape(-1).view(dtype)
             tags_ok = all(np.all(packed[f"_tag{i}"] == tag) for i, tag in enumerate(spec.tags))
             if tags_ok:
                 return {name: packed[name].astype(np.float64) for name in names}
         # Another writer may omit zero fields or order them differently: decode properly.
         cls = schemas.message_class(schema.name, schema.data)
         columns: dict[str, list[float]] = {name: [] for name in names}
-        for payload in payloads:
+        for payload in stream.payloads():
             msg = self._parse(cls, payload, topic)
             for name in names:
                 columns[name].append(getattr(msg, name))
@@ -223,7 +403,7 @@ class RecordingReader:
             return []
         cls = self._message_class(schemas.EVENTS_TOPIC)
         out = []
-        for payload in self._stream(schemas.EVENTS_TOPIC).payloads:
+        for payload in self._stream(schemas.EVENTS_TOPIC).payloads():
             msg = self._parse(cls, payload, schemas.EVENTS_TOPIC)
             try:
                 data = json.loads(msg.data) if msg.data else {}
@@ -238,7 +418,7 @@ class RecordingReader:
         cls = self._message_class(topic)
         return [
             Traffic(m.time_s, m.direction, bytes(m.data))
-            for m in (self._parse(cls, p, topic) for p in self._stream(topic).payloads)
+            for m in (self._parse(cls, p, topic) for p in self._stream(topic).payloads())
         ]
 
     def images(self, topic: str = "/camera/image") -> Iterator[Image]:
@@ -278,11 +458,16 @@ class RecordingReader:
                 raise RecordingError(
                     f"{self.path}: metadata recording.start_time_ns={value!r} is not an integer"
                 ) from None
-        firsts = [min(s.log_times) for s in self._streams.values() if s.log_times]
-        return min(firsts) if firsts else 0
+        spans = [span for s in self._streams.values() if (span := s.first_last_ns()) is not None]
+        return min(first for first, _ in spans) if spans else 0
 
     def _to_time_s(self, log_ns: int) -> float:
         return (log_ns - self.start_time_ns) / 1e9
+
+    def _new_stream(self, channel_id: int) -> _Stream:
+        # Lazy or not is decided by the schema known at the channel's first message, as it always was.
+        stream = self._streams[channel_id] = _Stream(self._schema_name(channel_id) in _LAZY_SCHEMAS)
+        return stream
 
     def _schema_name(self, channel_id: int) -> str:
         channel = self._channels.get(channel_id)
