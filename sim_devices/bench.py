@@ -164,7 +164,9 @@ class SimBench:
                                    calibration_SI=load_calibration_SI(NANO17_CAL),
                                    noise_V=1e-3 if s.noise else 0.0)
         self.daq = SimDaq(self.clock, self.rng["daq"], amplifiers=amps, nano17=nano17,
-                          wrench_source=self._wrench if nano17 else None, ai_noise_V=1e-3 if s.noise else 0.0)
+                          wrench_source=self._wrench if nano17 else None,
+                          force_z_source=self.contact_forces_N if nano17 else None,
+                          ai_noise_V=1e-3 if s.noise else 0.0)
 
     def _build_stage(self) -> None:
         s = self.settings
@@ -228,8 +230,12 @@ class SimBench:
         vb = np.asarray(self.daq.output_voltage_V("ao0", times_s), dtype=float)
         vd = np.asarray(self.daq.output_voltage_V("ao1", times_s), dtype=float)
         # The model refuses voltages beyond its limit; the amplifier's own lag can overshoot by a hair.
+        return self._clip_to_limit(vb), self._clip_to_limit(vd)
+
+    def _clip_to_limit(self, volts: np.ndarray) -> np.ndarray:
+        """`np.clip(volts, -limit, limit)` (the same values) without its wrapper's cost, asked per sensor read."""
         limit = self.powertrain.voltage_limit_V
-        return np.clip(vb, -limit, limit), np.clip(vd, -limit, limit)
+        return np.minimum(np.maximum(volts, -limit), limit)
 
     def _tabulate_free_height(self) -> tuple[np.ndarray, np.ndarray]:
         """Free foot height as a function of the actuator's free deflection u, which is all it depends on. The
@@ -248,9 +254,11 @@ class SimBench:
 
     def drive_many(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Effective (V_bias, V_drive) the actuator acts on at each time, after drive-memory effects."""
-        vb, vd = self.memory.many(np.asarray(times_s, dtype=float))
-        limit = self.powertrain.voltage_limit_V
-        return np.clip(vb, -limit, limit), np.clip(vd, -limit, limit)
+        times_s = np.asarray(times_s, dtype=float)
+        if not self.memory.active:  # the commanded outputs, clipped already
+            return self._commanded_outputs(times_s) if times_s.size else self.memory.many(times_s)
+        vb, vd = self.memory.many(times_s)
+        return self._clip_to_limit(vb), self._clip_to_limit(vd)
 
     def _drive_scalar(self, time_s: float) -> tuple[float, float]:
         """`drive_many` for one time in plain floats (the same values; asked once per force-sensor sample)."""
@@ -273,7 +281,9 @@ class SimBench:
         """Force on a rigid surface `surface_m` in past first touch; 0 out of contact (vectorised). The model is
         only asked where there is contact: a surface far from the foot may lie outside the linkage's reach.
         `free_height_m` (leg only): the free foot height at (vb, vd), when the caller has it already."""
-        vb, vd, surface_m = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (vb, vd, surface_m)))
+        vb, vd, surface_m = (np.asarray(a, dtype=float) for a in (vb, vd, surface_m))
+        if not vb.shape == vd.shape == surface_m.shape:
+            vb, vd, surface_m = np.broadcast_arrays(vb, vd, surface_m)
         force = np.zeros(surface_m.shape)
         vmap = self.powertrain.plate_voltage_map
         if self.settings.fixture == "leg":

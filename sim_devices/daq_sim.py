@@ -12,7 +12,8 @@ the real amplifier and Nano17 drivers run on it unchanged. Everything is timed o
 - Gauge AI channels read `inv(C) @ wrench(t) + bias` plus noise, clipped at the DAQ range;
   `wrench_source(time_s)` is the bench's callback returning (Fx, Fy, Fz in N, Tx, Ty, Tz in N m) and `C` the
   calibration matrix in SI. A callback with the attribute `vectorised = True` is called once per block with an
-  array of times and returns shape (n, 6).
+  array of times and returns shape (n, 6). A `force_z_source(times_s)` (Fz alone, the other components zero, as the
+  bench's tip presses) is used instead when given: the same volts without the 6x6 product.
 
 Not modelled: amplifier slew-rate limit and current limit, output impedance and the PZT's capacitive load, DAQ
 quantisation and range settings, AI/AO settling, buffer overflow of a stream read too rarely.
@@ -144,7 +145,8 @@ def _segment_output(seg: _Segment, t: np.ndarray, tau_s: float) -> np.ndarray:
     """Output at times `t` that all fall in segment `seg`: each sample's target, approached from the output at that
     sample's update time with the amplifier's time constant `tau_s` (held when `tau_s` is 0)."""
     if math.isfinite(seg.dt_s):
-        k = np.clip(((t - seg.t0_s) / seg.dt_s).astype(int), 0, len(seg.target_V) - 1)
+        k = ((t - seg.t0_s) / seg.dt_s).astype(int)
+        np.minimum(np.maximum(k, 0, out=k), len(seg.target_V) - 1, out=k)
         tk = seg.t0_s + k * seg.dt_s
     else:
         k = np.zeros(t.shape, dtype=int)
@@ -165,6 +167,7 @@ class SimDaq:
         amplifiers: Sequence[SimAmplifierSpec] = (),
         nano17: SimNano17Spec | None = None,
         wrench_source: Callable[[float], Sequence[float]] | None = None,
+        force_z_source: Callable[[np.ndarray], np.ndarray] | None = None,
         ai_channels: Sequence[str] = (),
         ao_channels: Sequence[str] = (),
         ai_noise_V: float = 1e-3,
@@ -190,12 +193,15 @@ class SimDaq:
             self._ao.setdefault(name, _AoChannel(None, 0.0))
         self._nano17 = nano17
         self._wrench_source = wrench_source
+        # Optional: Fz at an array of times, for a wrench that is Fz alone (the bench's tip presses along z).
+        self._force_z_source = force_z_source
         self._gauge_index: dict[str, int] = {}
         if nano17 is not None:
             if wrench_source is None:
                 raise ConfigError("SimDaq: a Nano17 needs a wrench_source(time_s) callback")
             self._gauge_index = {ch: i for i, ch in enumerate(nano17.gauge_channels)}
             self._inverse_cal = np.linalg.inv(np.asarray(nano17.calibration_SI, dtype=float))
+            self._bias_column = np.asarray(nano17.bias_V, dtype=float)[:, None]
         self._plain_ai = set(ai_channels)
         self._faults = FaultInjector(DAQ_FAULTS, "sim DAQ", clock)
         self._stream: tuple[tuple[str, ...], float, float] | None = None  # channels, rate, next sample time
@@ -330,12 +336,16 @@ class SimDaq:
             return target + (yk - target) * math.exp(-(t - tk) / ch.tau_s)
         return target
 
-    def _output(self, ch: _AoChannel, t: np.ndarray, apply_trip: bool = True) -> np.ndarray:
+    def _output(self, ch: _AoChannel, t: np.ndarray, apply_trip: bool = True,
+                span: tuple[float, float] | None = None) -> np.ndarray:
+        """Output at times `t`; `span` is (t.min(), t.max()) when the caller has it already."""
         if t.size == 1:
             return np.array([self._output_at(ch, float(t.flat[0]), apply_trip)])
+        if t.size and span is None:
+            span = (float(t.min()), float(t.max()))
         if t.size and ch.segments and ch.tau_s > 0:
-            lo = bisect.bisect_right(ch.starts_s, float(t.min())) - 1
-            if lo >= 0 and bisect.bisect_right(ch.starts_s, float(t.max())) - 1 == lo:
+            lo = bisect.bisect_right(ch.starts_s, span[0]) - 1
+            if lo >= 0 and bisect.bisect_right(ch.starts_s, span[1]) - 1 == lo:
                 # every time in one segment (a monitor read): the loop below without its index bookkeeping
                 out = _segment_output(ch.segments[lo], t, ch.tau_s)
                 if apply_trip and ch.tripped_at_s is not None:
@@ -346,8 +356,8 @@ class SimDaq:
             # Only the segments between the first and last time asked matter: converting the whole history (tens
             # of thousands of ramp steps) to an array on every monitor read dominated the bench's cost. (One time
             # alone took the scalar path above.)
-            lo = max(bisect.bisect_right(ch.starts_s, float(t.min())) - 1, 0)
-            hi = bisect.bisect_right(ch.starts_s, float(t.max()))
+            lo = max(bisect.bisect_right(ch.starts_s, span[0]) - 1, 0)
+            hi = bisect.bisect_right(ch.starts_s, span[1])
             idx = np.searchsorted(np.asarray(ch.starts_s[lo:hi]), t, side="right") - 1 + lo
             for i in np.unique(idx[idx >= 0]):
                 sel = idx == i
@@ -364,11 +374,12 @@ class SimDaq:
                 raise ConfigError(f"sim DAQ: output at t={time_s:g} s is older than history_s={self._history_s:g}")
             return self._output_at(ch, time_s)
         t = np.atleast_1d(np.asarray(time_s, dtype=float))
-        if t.size and t.min() < self._clock.now_s() - self._history_s:
+        span = (float(t.min()), float(t.max())) if t.size else None
+        if span and span[0] < self._clock.now_s() - self._history_s:
             raise ConfigError(
-                f"sim DAQ: output at t={t.min():g} s is older than history_s={self._history_s:g}"
+                f"sim DAQ: output at t={span[0]:g} s is older than history_s={self._history_s:g}"
             )
-        out = self._output(ch, t)
+        out = self._output(ch, t, span=span)
         return float(out[0]) if np.ndim(time_s) == 0 else out
 
     # ---- analog input --------------------------------------------------------------------------------------
@@ -395,18 +406,25 @@ class SimDaq:
     def _gauge_volts(self, times_s: np.ndarray) -> np.ndarray:
         spec = self._nano17
         assert spec is not None and self._wrench_source is not None
-        if getattr(self._wrench_source, "vectorised", False):  # one call for the whole block (the bench's)
-            wrench = np.asarray(self._wrench_source(times_s), dtype=float).reshape(-1, 6)
+        force_z = self._force_z_source
+        if force_z is not None:
+            # A source that presses along z only (the bench's tip): the calibration's z column times Fz is what
+            # the full product gives when the other five components are zero, bit for bit, for a fifth of its cost.
+            fz = np.asarray(force_z(times_s), dtype=float)
+            volts = self._inverse_cal[:, 2:3] * fz + self._bias_column
         else:
-            wrench = np.array([np.asarray(self._wrench_source(float(t)), dtype=float) for t in times_s])
-            wrench = wrench.reshape(-1, 6)
-        volts = self._inverse_cal @ wrench.T + np.asarray(spec.bias_V)[:, None]
+            if getattr(self._wrench_source, "vectorised", False):  # one call for the whole block
+                wrench = np.asarray(self._wrench_source(times_s), dtype=float).reshape(-1, 6)
+            else:
+                wrench = np.array([np.asarray(self._wrench_source(float(t)), dtype=float) for t in times_s])
+                wrench = wrench.reshape(-1, 6)
+            volts = self._inverse_cal @ wrench.T + self._bias_column
         volts += self._gauge_rng.normal(0.0, spec.noise_V, volts.shape[::-1]).T  # one row of 6 per sample
         if times_s.size and self._faults.is_active("overload", float(times_s[-1])):
             # the sensor is pushed far past its range: every gauge pins at the input limit
             overloaded = np.array([self._faults.is_active("overload", float(t)) for t in times_s], dtype=bool)
             volts[:, overloaded] = np.where(volts[:, overloaded] >= 0, spec.range_V, -spec.range_V)
-        return np.clip(volts, -spec.range_V, spec.range_V)
+        return np.minimum(np.maximum(volts, -spec.range_V, out=volts), spec.range_V, out=volts)
 
     def read_ai(
         self, channels: Sequence[str], n_samples: int, sample_rate_Hz: float, timeout_s: float = 10.0
