@@ -10,9 +10,9 @@ file this module writes is checked by an independent implementation in the tests
 Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records as they
 are registered (outside chunks, so a truncated file still describes its channels), Chunks each followed by one
 MessageIndex per channel (one chunk is open per compression, so chunks of frames and of scalars interleave and may
-overlap in time; within a channel, file order is time order), Metadata records between chunks; DataEnd with the CRC of the data section; the
-summary section: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes, SummaryOffsets; Footer with the
-summary CRC; magic. All CRCs are written (chunk, data section, summary).
+overlap in time; within a channel, file order is time order), Metadata records between chunks; DataEnd with the
+CRC of the data section; the summary section: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes,
+SummaryOffsets; Footer with the summary CRC; magic. All CRCs are written (chunk, data section, summary).
 """
 
 from __future__ import annotations

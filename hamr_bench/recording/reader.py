@@ -2,9 +2,9 @@
 
 The whole data section is scanned once when the reader opens (validating every chunk CRC, the data-section CRC and
 the summary CRC unless `validate_crcs=False`). Chunks whose message indexes check out are taken in per-channel
-numpy blocks (`index_scan.py`), the others record by record; a stream keeps both kinds of block in file order and
-joins them when asked, so both ways give the same answers. Scalars, events and traffic are kept in memory (tens of MB for an
-hour at 10 kHz); images stay on disk and are fetched chunk by chunk when iterated. A file without a footer (a
+numpy blocks (`index_scan.py`), the others record by record; a `ChannelStream` keeps both kinds of block in file
+order and joins them when asked, so both ways give the same answers. Scalars, events and traffic are kept in memory
+(tens of MB for an hour at 10 kHz); images stay on disk and are fetched chunk by chunk when iterated. A file without a footer (a
 killed writer) is read up to its last complete record with a `RecordingWarning`; a damaged file raises
 `RecordingError` naming the file and the byte at fault.
 """
@@ -33,6 +33,7 @@ from hamr_bench.recording.index_scan import (
     split_chunk,
     walk_chunk,
 )
+from hamr_bench.recording.channel_stream import ChannelStream
 from hamr_bench.recording.scan import (
     ChannelRecord,
     MessageRecord,
@@ -104,83 +105,6 @@ class Traffic:
     data: bytes
 
 
-class _Stream:
-    """One channel's messages in file order, as blocks: Python lists filled record by record, or the numpy arrays of
-    an indexed chunk (log times int64; payloads an (n, size) uint8 array when all have one size). Lazy (image)
-    streams keep no payloads, only the offsets of the chunks that hold them."""
-
-    __slots__ = ("lazy", "time_blocks", "payload_blocks", "chunk_offsets", "count", "_times", "_payloads")
-
-    def __init__(self, lazy: bool = False) -> None:
-        self.lazy = lazy
-        self.time_blocks: list[list[int] | np.ndarray] = []
-        self.payload_blocks: list[list[bytes] | np.ndarray] = []
-        self.chunk_offsets: list[int] = []
-        self.count = 0
-        self._times: list[int] | None = None  # the list block being filled record by record, if the last is one
-        self._payloads: list[bytes] | None = None
-
-    def add_record(self, log_time: int, payload: bytes) -> None:
-        if self._times is None:
-            self._times = []
-            self.time_blocks.append(self._times)
-            if not self.lazy:
-                self._payloads = []
-                self.payload_blocks.append(self._payloads)
-        self._times.append(log_time)
-        if self._payloads is not None:
-            self._payloads.append(payload)
-        self.count += 1
-
-    def add_block(self, log_times: np.ndarray, payloads: np.ndarray | list[bytes] | None) -> None:
-        self._times = self._payloads = None
-        self.time_blocks.append(log_times)
-        if payloads is not None:
-            self.payload_blocks.append(payloads)
-        self.count += len(log_times)
-
-    def add_chunk_offset(self, chunk_offset: int) -> None:
-        if not self.chunk_offsets or self.chunk_offsets[-1] != chunk_offset:
-            self.chunk_offsets.append(chunk_offset)
-
-    def first_last_ns(self) -> tuple[int, int] | None:
-        """Smallest and largest log time (Python ints, as the record path always gave), None if no message."""
-        lows = [int(b.min()) if isinstance(b, np.ndarray) else min(b) for b in self.time_blocks if len(b)]
-        highs = [int(b.max()) if isinstance(b, np.ndarray) else max(b) for b in self.time_blocks if len(b)]
-        return (min(lows), max(highs)) if lows else None
-
-    def log_times(self) -> np.ndarray:
-        # np.asarray on a list block raises OverflowError past int64 as before; indexed blocks never hold such times.
-        if not self.time_blocks:
-            return np.asarray([], dtype=np.int64)
-        return np.concatenate([np.asarray(b, dtype=np.int64) for b in self.time_blocks])
-
-    def payloads(self) -> list[bytes]:
-        out: list[bytes] = []
-        for block in self.payload_blocks:
-            if isinstance(block, np.ndarray):
-                out.extend(row.tobytes() for row in block)
-            else:
-                out.extend(block)
-        return out
-
-    def payload_matrix(self, size: int) -> np.ndarray | None:
-        """All payloads as one (n, size) uint8 array if every one is `size` bytes long, else None."""
-        parts = []
-        for block in self.payload_blocks:
-            if isinstance(block, np.ndarray):
-                if block.shape[1] != size:
-                    return None
-                parts.append(block)
-            else:
-                if not all(len(p) == size for p in block):
-                    return None
-                parts.append(np.frombuffer(b"".join(block), dtype=np.uint8).reshape(-1, size))
-        if not parts:
-            return np.empty((0, size), dtype=np.uint8)
-        return np.ascontiguousarray(np.concatenate(parts) if len(parts) > 1 else parts[0])
-
-
 class _Reread(Exception):
     """A chunk the index path could not take does not parse record by record either: read the file again the plain
     way, so that the outcome (error, or partial read) is exactly the plain scan's."""
@@ -219,7 +143,7 @@ class RecordingReader:
         self._schemas: dict[int, SchemaRecord] = {}
         self._channels: dict[int, ChannelRecord] = {}
         self._metadata: dict[str, dict[str, str]] = {}
-        self._streams: dict[int, _Stream] = {}
+        self._streams: dict[int, ChannelStream] = {}
         self.orphan_messages = 0  # messages whose channel record was lost
         self.chunks_indexed = 0  # chunks whose messages were taken through their message indexes
 
@@ -378,7 +302,7 @@ class RecordingReader:
             raise RecordingError(
                 f"{self.path}: topic {topic} is not a scalar stream (schema {self._schema_name(channel.id)})"
             )
-        stream = self._streams.get(channel.id) or _Stream()
+        stream = self._streams.get(channel.id) or ChannelStream()
         names = ("time_s", *fields)
         spec = schemas.ScalarSchema("", tuple(fields))
         # The fixed wire layout of a flat all-double message: tag byte then 8-byte double, per field.
@@ -464,9 +388,9 @@ class RecordingReader:
     def _to_time_s(self, log_ns: int) -> float:
         return (log_ns - self.start_time_ns) / 1e9
 
-    def _new_stream(self, channel_id: int) -> _Stream:
+    def _new_stream(self, channel_id: int) -> ChannelStream:
         # Lazy or not is decided by the schema known at the channel's first message, as it always was.
-        stream = self._streams[channel_id] = _Stream(self._schema_name(channel_id) in _LAZY_SCHEMAS)
+        stream = self._streams[channel_id] = ChannelStream(self._schema_name(channel_id) in _LAZY_SCHEMAS)
         return stream
 
     def _schema_name(self, channel_id: int) -> str:
@@ -481,8 +405,8 @@ class RecordingReader:
             raise RecordingError(f"{self.path} has no topic {topic} (topics: {known})")
         return channel
 
-    def _stream(self, topic: str) -> _Stream:
-        return self._streams.get(self._channel(topic).id) or _Stream()
+    def _stream(self, topic: str) -> ChannelStream:
+        return self._streams.get(self._channel(topic).id) or ChannelStream()
 
     def _message_class(self, topic: str) -> Any:
         channel = self._channel(topic)
