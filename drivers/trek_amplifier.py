@@ -25,7 +25,7 @@ import numpy as np
 
 from drivers.daq import DaqBackend
 from hamr_bench.clock import Clock
-from hamr_bench.errors import ConfigError, DeviceFault, SafetyLimitError
+from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout, SafetyLimitError
 
 
 def _positive(name: str, value: float) -> float:
@@ -182,9 +182,13 @@ class TrekAmplifier:
     def monitor_voltage_V(self) -> float:
         block = self._daq.read_ai([self._mon], self._mon_n, self._mon_rate, self._timeout_s)
         data = np.asarray(block.data_V, dtype=float)
-        monitor_V = float(np.mean(data[0])) * self._mon_scale
-        times = block.start_time_s + np.arange(data.shape[1]) / block.sample_rate_Hz
-        commanded_V = float(np.mean(self._commanded_daq(times))) * self._gain
+        n = data.shape[1]
+        if n == 0:
+            raise DeviceTimeout(f"{self._name}: monitor {self._mon} returned no samples", device=self._name)
+        # sum / n is np.mean's own arithmetic, without its dispatch (read twice per 20 ms poll of a run)
+        monitor_V = float(np.add.reduce(data[0])) / n * self._mon_scale
+        times = block.start_time_s + np.arange(n) / block.sample_rate_Hz
+        commanded_V = float(np.add.reduce(self._commanded_daq(times))) / n * self._gain
         if commanded_V >= self._trip_min_V and monitor_V < self._trip_fraction * commanded_V:
             raise DeviceFault(
                 f"{self._name}: amplifier trip: monitor {self._mon} reads {monitor_V:.1f} V "

@@ -112,7 +112,7 @@ class Powertrain:
         v = np.asarray(voltage_V, dtype=float)
         # One reduction on the usual (valid) path: the simulated bench asks this per sensor read and camera frame.
         # The peak is NaN if any value is, and NaN <= limit is False.
-        if v.size and not float(np.max(np.abs(v))) <= self.voltage_limit_V:
+        if v.size and not float(np.abs(v).max()) <= self.voltage_limit_V:
             if not np.all(np.isfinite(v)):
                 raise ModelError(f"{name} must be finite")
             raise ModelError(f"{name}={float(np.max(np.abs(v))):.6g} V exceeds the configured limit "
