@@ -250,7 +250,10 @@ class IndexBatch:
         cand_id, start, in_range, n = cand_id[order], start[order], in_range[order], n[order]
         claimed, index_time = claimed[order], pairs[order, 0]
         if len(buf) >= _HEAD_SIZE:
-            heads = sliding_window_view(buf, _HEAD_SIZE)[start].view(_HEAD)[:, 0]
+            # An out-of-range entry looks at its chunk's start, which for a chunk shorter than a header at the end
+            # of the batch is past the last full header: clip (that entry is bad already).
+            at = np.minimum(start, len(buf) - _HEAD_SIZE)
+            heads = sliding_window_view(buf, _HEAD_SIZE)[at].view(_HEAD)[:, 0]
         else:
             heads = np.zeros(len(start), dtype=_HEAD)
         length = heads["length"]

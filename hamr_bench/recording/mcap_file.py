@@ -10,7 +10,8 @@ file this module writes is checked by an independent implementation in the tests
 Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records as they
 are registered (outside chunks, so a truncated file still describes its channels), Chunks each followed by one
 MessageIndex per channel (one chunk is open per compression, so chunks of frames and of scalars interleave and may
-overlap in time; within a channel, file order is time order), Metadata records between chunks; DataEnd with the
+overlap in time; within a channel whose messages all use one compression, as the recorder's do, file order is
+time order), Metadata records between chunks; DataEnd with the
 CRC of the data section; the summary section: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes,
 SummaryOffsets; Footer with the summary CRC; magic. All CRCs are written (chunk, data section, summary).
 """
@@ -136,7 +137,8 @@ class McapFileWriter:
         """One message into the open chunk of its compression (default: the file's). One chunk is open per
         compression, so camera frames fill stored chunks of their own while scalars fill compressed ones: a frame
         no longer cuts the scalars' chunk short (with one chunk at a time, every frame of a camera run closed two
-        chunks, each with its index records)."""
+        chunks, each with its index records). Give one channel's messages one compression: split over two, they
+        reach the file in the order their chunks close, not in the order they came."""
         wanted = self.compression if compression is None else compression
         chunk = self._open.get(wanted)
         if chunk is None:

@@ -6,6 +6,8 @@ damaged message index. The reference is `RecordingReader(..., use_message_indexe
 from __future__ import annotations
 
 import os
+import struct
+import zlib
 import warnings
 
 import numpy as np
@@ -213,3 +215,35 @@ def test_orphan_messages_are_counted_the_same(recorded, tmp_path):
         assert reader.orphan_messages >= 0
     os.truncate(target, len(data) // 3)
     _assert_same(target, validate_crcs=False)
+
+
+def _record(opcode: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(body)) + body
+
+
+def _text(value: str) -> bytes:
+    return struct.pack("<I", len(value)) + value.encode()
+
+
+def test_an_index_claiming_a_message_in_a_chunk_too_short_for_one_is_not_trusted(tmp_path):
+    """A chunk shorter than a message header, whose index claims a message, at the end of a batch (found by a fuzzing
+    review: the header look-up ran past the batch's bytes and raised IndexError). Read as the plain scan reads it."""
+    from hamr_bench.recording import schemas
+
+    force = schemas.FORCE
+    records = [_record(0x03, struct.pack("<H", 1) + _text(force.name) + _text("protobuf")
+                       + struct.pack("<I", len(force.descriptor_set())) + force.descriptor_set()),
+               _record(0x04, struct.pack("<HH", 1, 1) + _text("/force") + _text("protobuf") + struct.pack("<I", 0))]
+    for log_time, inner, entries in ((10, True, [(10, 0)]), (11, True, [(11, 0)]), (11, False, [(11, 0)])):
+        data = _record(0x05, struct.pack("<HIQQ", 1, 0, log_time, log_time)
+                       + force.packer()(log_time * 1e-9, {"force_N": 1.0})) if inner else b""
+        records.append(_record(OP_CHUNK, struct.pack("<QQQI", log_time, log_time, len(data), zlib.crc32(data))
+                               + _text("") + struct.pack("<Q", len(data)) + data))
+        index = b"".join(struct.pack("<QQ", t, offset) for t, offset in entries)
+        records.append(_record(OP_MESSAGE_INDEX, struct.pack("<HI", 1, len(index)) + index))
+    body = b"\x89MCAP0\r\n" + _record(0x01, _text("") + _text("test")) + b"".join(records)
+    body += _record(0x0F, struct.pack("<I", zlib.crc32(body)))
+    path = tmp_path / "tiny-chunk.mcap"
+    path.write_bytes(body + struct.pack("<BQQQI", 0x02, 20, 0, 0, 0) + b"\x89MCAP0\r\n")
+    reader = _assert_same(path)
+    assert reader is not None and reader.scalars("/force")["force_N"].tolist() == [1.0, 1.0]
