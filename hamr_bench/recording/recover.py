@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording import schemas
+from hamr_bench.recording.mcap_file import McapFileWriter
 from hamr_bench.recording.scan import (
     ChannelRecord,
     MessageRecord,
@@ -43,8 +45,6 @@ class RecoverReport:
 
 
 def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> RecoverReport:
-    from mcap.writer import CompressionType, Writer
-
     from hamr_bench import __version__
 
     src, dst = Path(src), Path(dst)
@@ -60,12 +60,14 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
     except OSError as exc:
         raise RecordingError(f"cannot create {dst}: {exc.strerror or exc}") from None
 
-    writer = Writer(
-        out, chunk_size=256 * 1024, compression=CompressionType.LZ4, enable_crcs=True, enable_data_crcs=True
-    )
+    # The recorder's own writer, as the recorder writes: every schema and channel kept (written when registered,
+    # even one whose messages were all lost), frames in stored chunks, all CRCs.
+    writer = McapFileWriter(out, chunk_size=256 * 1024, compression="lz4")
     writer.start(profile="", library=f"hamr-bench {__version__} (recover)")
+    stored_channels: set[int] = set()  # image channels: their frames go in stored chunks
     schema_ids: dict[int, int] = {}
     schema_keys: dict[tuple[str, str, bytes], int] = {}
+    schema_names: dict[int, str] = {}
     channel_ids: dict[int, int] = {}
     channel_keys: dict[tuple[str, str, int], int] = {}
     topics: dict[int, str] = {}
@@ -85,7 +87,8 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
             if new_id is None:
                 orphans += 1
                 return
-            writer.add_message(new_id, record.log_time, record.data, record.publish_time, record.sequence)
+            writer.add_message(new_id, record.log_time, record.data, record.publish_time, record.sequence,
+                               compression="" if new_id in stored_channels else None)
             topic = topics[new_id]
             counts[topic] = counts.get(topic, 0) + 1
             last_log = record.log_time if last_log is None else max(last_log, record.log_time)
@@ -94,6 +97,7 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
             key = (record.name, record.encoding, record.data)
             if key not in schema_keys:
                 schema_keys[key] = writer.register_schema(record.name, record.encoding, record.data)
+                schema_names[schema_keys[key]] = record.name
             schema_ids[record.id] = schema_keys[key]
         elif isinstance(record, ChannelRecord):
             key = (record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0))
@@ -102,6 +106,8 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                     record.topic, record.message_encoding, key[2], record.metadata
                 )
                 topics[channel_keys[key]] = record.topic
+                if schema_names.get(key[2]) in schemas.IMAGE_SCHEMAS:
+                    stored_channels.add(channel_keys[key])
             channel_ids[record.id] = channel_keys[key]
         elif isinstance(record, MetadataRecord):
             if record.name == "run_end":

@@ -82,10 +82,14 @@ def test_recover_turns_any_truncation_into_a_valid_file(small_recording, tmp_pat
             recover(src, tmp_path / "out.mcap")
         assert not (tmp_path / "out.mcap").exists()
         return
-    source_kind, source = _read(src)
+    source_outcome = _read(src)
+    source_kind, source = source_outcome[0], source_outcome[1]
     report = recover(src, tmp_path / "out.mcap")
     kind, reader = _read(tmp_path / "out.mcap")
     assert kind == "ok"
+    if source_kind != "error":
+        # every topic the cut file still describes is kept, even one whose messages were all lost
+        assert set(reader.topics()) == set(source.topics())
     assert reader.metadata()["run_end"]["recovered"] == "true"
     if source_kind == "partial" and source.exit_status is not None:
         # Cut inside the summary: the run had ended and said how; recover keeps that.
