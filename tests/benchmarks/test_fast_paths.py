@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hamr_bench.recording.images import encode_png_stored
-from hamr_bench.recording.writer import compressed_image_payload, raw_image_payload
+from hamr_bench.recording.image_payloads import compressed_image_payload, raw_image_payload
 
 
 @settings(max_examples=300, deadline=None)
