@@ -33,6 +33,8 @@ from hamr_bench.protocols.plan import (
 from hamr_bench.rig import Rig
 
 POLL_INTERVAL_S = 0.02
+# Contact search: a back-off step that changes the mean force by less than this fraction of the threshold is flat
+FLAT_FRACTION = 0.125
 SLOW_STREAM_INTERVAL_S = 0.02  # stage position and amplifier monitors
 FORCE_WINDOW_S = 0.1  # averaging window of a force reading during the contact search
 # While sampling (drives, dwells) the stage is asked this often whether it still holds its position: a following
@@ -268,15 +270,29 @@ class Runner:
         # release threshold.
         release_N = msg.threshold_N / 4
         backed = 0.0
-        while force > release_N and backed < 2 * msg.coarse_step_m + msg.max_travel_m:
+        # The force with nothing touching: the tare's zero, unless the sensor's baseline drifts during the search (a
+        # load cell's does, ~0.1 mN in a minute). Contact force falls as the search backs off, a baseline does not:
+        # two back-off steps in a row that leave the reading within FLAT_FRACTION of the threshold mean the leg is
+        # clear and the reading is the baseline, and the rest of the search measures from it. (Without this, a
+        # baseline above the release level kept the search backing off to the end of the stage's travel.) A leg
+        # in contact loses k x coarse step a step once the stage's play is taken up: 0.12 mN for the softest
+        # design, against a flat band of 0.05 mN.
+        baseline_N = 0.0
+        flat_steps = 0
+        while force - baseline_N > release_N and backed < 2 * msg.coarse_step_m + msg.max_travel_m:
             position -= sign * msg.coarse_step_m
             backed += msg.coarse_step_m
             self._move_in_safe_steps(position)
-            force = self._mean_force(FORCE_WINDOW_S)
+            previous_N, force = force, self._mean_force(FORCE_WINDOW_S)
+            # Within the stage's play (at most `clearance_m`) the carriage has not moved yet: no telling from there.
+            flat = backed > msg.clearance_m and abs(force - previous_N) < FLAT_FRACTION * msg.threshold_N
+            flat_steps = flat_steps + 1 if flat else 0
+            if flat_steps >= 2 and force - baseline_N > release_N:
+                baseline_N = force
         released = position
         self._move_in_safe_steps(self._clamp_to_limits(released - sign * msg.clearance_m))
         self._move_in_safe_steps(released)
-        force = self._mean_force(FORCE_WINDOW_S)
+        force = self._mean_force(FORCE_WINDOW_S) - baseline_N
         touching = [(position, force)] if force > release_N else []
         travelled = 0.0
         while force < msg.threshold_N:
@@ -288,7 +304,7 @@ class Runner:
             position += sign * msg.fine_step_m
             travelled += msg.fine_step_m
             self._move_in_safe_steps(position)
-            force = self._mean_force(FORCE_WINDOW_S)
+            force = self._mean_force(FORCE_WINDOW_S) - baseline_N
             if force > release_N:
                 touching.append((position, force))
         # With fewer than three pairs (a very stiff tip) the zero is taken half a step before the first touch.
@@ -300,8 +316,13 @@ class Runner:
         self._move_in_safe_steps(self._clamp_to_limits(zero_sag_m - sign * msg.clearance_m))
         self._move_in_safe_steps(zero_sag_m)
         position = zero_sag_m
-        self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
-                    stage_position_m=position)
+        if baseline_N:
+            self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm (force measured from a "
+                        f"baseline of {baseline_N * 1e3:.3f} mN: the sensor drifted since its tare)",
+                        stage_position_m=position, baseline_N=baseline_N)
+        else:
+            self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
+                        stage_position_m=position)
         return position
 
     def _clamp_to_limits(self, position_m: float) -> float:

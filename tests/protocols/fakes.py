@@ -89,16 +89,20 @@ class FakeSensor:
     """Contact at stage position `touch_m`; leg spring `k_N_per_m`; drive adds `gain_N_per_V` x drive voltage."""
 
     def __init__(self, clock, stage, drive, touch_m=0.002, k_N_per_m=2.0, gain_N_per_V=2e-5, rate_Hz=150.0,
-                 fail_at_s=None, baseline_N=0.0):
+                 fail_at_s=None, baseline_N=0.0, drift_after_touch_N=0.0):
         self.clock, self.stage, self.drive = clock, stage, drive
         self.touch_m, self.k, self.gain, self.period = touch_m, k_N_per_m, gain_N_per_V, 1 / rate_Hz
         self.capacity_N, self.next_s, self.streaming, self.fail_at_s = 1.0, 0.0, False, fail_at_s
         self.baseline_N = baseline_N  # a reading offset the tare did not remove (a drifted baseline)
+        # a baseline step once the leg has first been touched: a load cell drifting during the contact search
+        self.drift_after_touch_N, self.touched = drift_after_touch_N, False
 
     def force_now(self, time_s=None):
         sag = self.stage.position - self.touch_m
+        self.touched = self.touched or sag > 0
         free = self.drive.voltage_at(self.clock.now_s() if time_s is None else time_s) * self.gain
-        return self.baseline_N + (max(0.0, self.k * sag + free) if sag > -free / self.k else 0.0)
+        baseline = self.baseline_N + (self.drift_after_touch_N if self.touched else 0.0)
+        return baseline + (max(0.0, self.k * sag + free) if sag > -free / self.k else 0.0)
 
     def tare(self):
         pass

@@ -43,6 +43,24 @@ def test_contact_search_finds_zero_sag_within_one_fine_step():
     assert abs(found[0] - rig.force_sensor.touch_m) <= params.fine_step_m + params.threshold_N / 4 / 2.0
 
 
+@pytest.mark.parametrize("k_N_per_m", [2.0, 10.0])
+def test_contact_search_measures_from_a_baseline_that_drifted_during_it(k_N_per_m):
+    # The load cell's baseline rises by 0.15 mN once the leg is first touched, above the search's release level
+    # (0.1 mN): backing off never brings the reading under it. The search must see that backing off no longer changes
+    # the force, measure from that baseline, and find the zero as it would without the drift (it used to back off
+    # to the end of the stage's travel and stop the run).
+    found = {}
+    for drift_N in (0.0, 0.15e-3):
+        rig = fake_rig(k_N_per_m=k_N_per_m, drift_after_touch_N=drift_N)
+        result, rec = run("blocked-force", rig)
+        assert result.ok, result.reason
+        (event,) = [e for e in rec.events if e[1] == "contact_found"]
+        found[drift_N] = event[4]["stage_position_m"]
+        assert event[4].get("baseline_N", 0.0) == pytest.approx(drift_N, abs=0.02e-3)
+    params = get_protocol("blocked-force").Params().contact
+    assert abs(found[0.15e-3] - found[0.0]) <= params.fine_step_m
+
+
 def test_contact_search_refuses_a_sensor_that_reads_force_out_of_contact():
     # Right after its tare, where the search starts, the sensor reads 0.25 mN (over half the 0.4 mN threshold): a
     # tare that did not take. The search would see contact everywhere; it must stop with one clear line instead of
