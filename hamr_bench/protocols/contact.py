@@ -6,7 +6,13 @@ module owns its parameters and the sub-plan.
 Every position the zero comes from is reached moving toward the leg, and so is the zero itself at the end: a
 lead-screw stage's play (backlash, ~3-30 um) is then taken up the same way as in the loading moves that follow, and
 does not shift the zero. `clearance_m` is how far the search backs off before approaching again: more than the
-play the stage may have."""
+play the stage may have.
+
+A load cell's baseline drifts (~0.1 mN a minute) and the search takes tens of seconds, so when backing off the
+reading may stay above the release level with nothing touching. Contact force falls as the search backs off; a
+baseline does not: two back-off steps past the stage's play that leave the force flat (within an eighth of the
+threshold) say the leg is clear, and the rest of the search measures force from that reading (the `contact_found`
+event then carries it as `baseline_N`)."""
 
 from __future__ import annotations
 
