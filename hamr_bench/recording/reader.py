@@ -4,9 +4,9 @@ The whole data section is scanned once when the reader opens (validating every c
 the summary CRC unless `validate_crcs=False`). Chunks whose message indexes check out are taken in per-channel
 numpy blocks (`index_scan.py`), the others record by record; a `ChannelStream` keeps both kinds of block in file
 order and joins them when asked, so both ways give the same answers. Scalars, events and traffic are kept in memory
-(tens of MB for an hour at 10 kHz); images stay on disk and are fetched chunk by chunk when iterated. A file without a footer (a
-killed writer) is read up to its last complete record with a `RecordingWarning`; a damaged file raises
-`RecordingError` naming the file and the byte at fault.
+(tens of MB for an hour at 10 kHz); images stay on disk and are fetched chunk by chunk when iterated. A file
+without a footer (a killed writer) is read up to its last complete record with a `RecordingWarning`; a damaged
+file raises `RecordingError` naming the file and the byte at fault.
 """
 
 from __future__ import annotations
