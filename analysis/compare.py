@@ -250,6 +250,8 @@ def format_comparison(result: dict[str, Any]) -> str:
                          f"RMS {v['rms_diff']:.4g}, noise {v['noise_diff']:.4g} [{why}]")
     else:
         lines.append("no channel differs beyond noise in any step")
+    lines.append("(max |A-B|: the largest single difference, B interpolated onto A's times, ramps included, so it can "
+                 "be large where the two sample a ramp ms apart; the verdicts weigh each step against its noise)")
     for key in ("steps_only_in_a", "steps_only_in_b", "channels_only_in_a", "channels_only_in_b"):
         if result[key]:
             lines.append(f"{key.replace('_', ' ')}: {result[key]}")
