@@ -81,7 +81,8 @@ def run_campaign(runs: list[CampaignRun], jobs: int | None = None, progress: boo
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(runs), desc="campaign", unit="run", dynamic_ncols=True)
+        # disable=None: no bar when stderr is not a terminal (a log gets the result lines, not redraws)
+        bar = tqdm(total=len(runs), desc="campaign", unit="run", dynamic_ncols=True, disable=None)
     results: list[tuple[str, str, str]] = []
     if jobs <= 1:
         for run in runs:

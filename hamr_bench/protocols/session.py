@@ -45,7 +45,8 @@ class TqdmProgress:
     def __init__(self, total: int, description: str) -> None:
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, desc=description, unit="step", leave=False, dynamic_ncols=True)
+        # disable=None: no bar when stderr is not a terminal (a log file or CI gets the result lines, not redraws)
+        self.bar = tqdm(total=total, desc=description, unit="step", leave=False, dynamic_ncols=True, disable=None)
         self.last = -1
 
     def step(self, index: int, label: str) -> None:
