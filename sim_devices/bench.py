@@ -164,8 +164,7 @@ class SimBench:
                                    calibration_SI=load_calibration_SI(NANO17_CAL),
                                    noise_V=1e-3 if s.noise else 0.0)
         self.daq = SimDaq(self.clock, self.rng["daq"], amplifiers=amps, nano17=nano17,
-                          wrench_source=self._wrench if nano17 else None,
-                          force_z_source=self.contact_forces_N if nano17 else None,
+                          force_z_source=self.contact_forces_N if nano17 else None,  # the tip presses along z
                           ai_noise_V=1e-3 if s.noise else 0.0)
 
     def _build_stage(self) -> None:
@@ -256,7 +255,7 @@ class SimBench:
         """Effective (V_bias, V_drive) the actuator acts on at each time, after drive-memory effects."""
         times_s = np.asarray(times_s, dtype=float)
         if not self.memory.active:  # the commanded outputs, clipped already
-            return self._commanded_outputs(times_s) if times_s.size else self.memory.many(times_s)
+            return self._commanded_outputs(times_s)
         vb, vd = self.memory.many(times_s)
         return self._clip_to_limit(vb), self._clip_to_limit(vd)
 
@@ -342,15 +341,6 @@ class SimBench:
                 self._force_cache.clear()
             self._force_cache[key] = force
         return force
-
-    def _wrench(self, time_s):
-        """(Fx, Fy, Fz, Tx, Ty, Tz) on the Nano17: the tip presses along Fz. Takes an array of times."""
-        forces = self.contact_forces_N(time_s)
-        wrench = np.zeros((forces.size, 6))
-        wrench[:, 2] = forces
-        return wrench[0] if np.ndim(time_s) == 0 else wrench
-
-    _wrench.vectorised = True  # type: ignore[attr-defined]
 
     def marker_position_m(self, time_s: float) -> float:
         """Displacement of the marker (foot down / tip toward the sensor positive) from its undriven rest."""

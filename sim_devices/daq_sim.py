@@ -10,10 +10,11 @@ the real amplifier and Nano17 drivers run on it unchanged. Everything is timed o
   `output_voltage_V(channel, time_s)` is computable at any time the bench asks (within `history_s`).
 - The monitor AI channel reads `output / monitor_scale` plus noise.
 - Gauge AI channels read `inv(C) @ wrench(t) + bias` plus noise, clipped at the DAQ range;
-  `wrench_source(time_s)` is the bench's callback returning (Fx, Fy, Fz in N, Tx, Ty, Tz in N m) and `C` the
+  `wrench_source(time_s)` is a callback returning (Fx, Fy, Fz in N, Tx, Ty, Tz in N m) and `C` the
   calibration matrix in SI. A callback with the attribute `vectorised = True` is called once per block with an
   array of times and returns shape (n, 6). A `force_z_source(times_s)` (Fz alone, the other components zero, as the
-  bench's tip presses) is used instead when given: the same volts without the 6x6 product.
+  bench's tip presses; the bench gives this one) is used instead when given: the same volts without the 6x6
+  product.
 
 Not modelled: amplifier slew-rate limit and current limit, output impedance and the PZT's capacitive load, DAQ
 quantisation and range settings, AI/AO settling, buffer overflow of a stream read too rarely.
@@ -197,8 +198,8 @@ class SimDaq:
         self._force_z_source = force_z_source
         self._gauge_index: dict[str, int] = {}
         if nano17 is not None:
-            if wrench_source is None:
-                raise ConfigError("SimDaq: a Nano17 needs a wrench_source(time_s) callback")
+            if wrench_source is None and force_z_source is None:
+                raise ConfigError("SimDaq: a Nano17 needs a wrench_source(time_s) or force_z_source(times_s) callback")
             self._gauge_index = {ch: i for i, ch in enumerate(nano17.gauge_channels)}
             self._inverse_cal = np.linalg.inv(np.asarray(nano17.calibration_SI, dtype=float))
             self._bias_column = np.asarray(nano17.bias_V, dtype=float)[:, None]
@@ -405,7 +406,7 @@ class SimDaq:
 
     def _gauge_volts(self, times_s: np.ndarray) -> np.ndarray:
         spec = self._nano17
-        assert spec is not None and self._wrench_source is not None
+        assert spec is not None
         force_z = self._force_z_source
         if force_z is not None:
             # A source that presses along z only (the bench's tip): the calibration's z column times Fz is what
@@ -413,6 +414,7 @@ class SimDaq:
             fz = np.asarray(force_z(times_s), dtype=float)
             volts = self._inverse_cal[:, 2:3] * fz + self._bias_column
         else:
+            assert self._wrench_source is not None
             if getattr(self._wrench_source, "vectorised", False):  # one call for the whole block
                 wrench = np.asarray(self._wrench_source(times_s), dtype=float).reshape(-1, 6)
             else:

@@ -68,6 +68,7 @@ class Problem:
         self.contact_shift: dict[int, float] = {}
         self._pinv_cache: dict = {}
         self.pure_dof = int(sum(max(r.n - 1, 0) for r in self.rows))
+        # The contact shifts and the sensor lags each move the other's best value: fitted in turn, shift last.
         self._fit_contact_shifts()
         self._fit_lags()
         self._fit_contact_shifts()

@@ -316,13 +316,12 @@ class Runner:
         self._move_in_safe_steps(self._clamp_to_limits(zero_sag_m - sign * msg.clearance_m))
         self._move_in_safe_steps(zero_sag_m)
         position = zero_sag_m
+        message, data = f"zero sag at stage {position * 1e3:.4f} mm", {"stage_position_m": position}
         if baseline_N:
-            self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm (force measured from a "
-                        f"baseline of {baseline_N * 1e3:.3f} mN: the sensor drifted since its tare)",
-                        stage_position_m=position, baseline_N=baseline_N)
-        else:
-            self._event("contact_found", message=f"zero sag at stage {position * 1e3:.4f} mm",
-                        stage_position_m=position)
+            message += (f" (force measured from a baseline of {baseline_N * 1e3:.3f} mN: the sensor drifted since "
+                        "its tare)")
+            data["baseline_N"] = baseline_N
+        self._event("contact_found", message=message, **data)
         return position
 
     def _clamp_to_limits(self, position_m: float) -> float:

@@ -23,15 +23,20 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
+def _timestamp(timestamp_ns: int) -> bytes:
+    """The body of a `google.protobuf.Timestamp` (seconds 1, nanos 2; zeros left out) for `timestamp_ns`."""
+    seconds, nanos = divmod(int(timestamp_ns), 1_000_000_000)
+    if not -(1 << 63) <= seconds < (1 << 63):
+        raise OverflowError(f"timestamp {timestamp_ns} ns out of range")
+    return (b"\x08" + _varint(seconds) if seconds else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+
+
 def compressed_image_payload(timestamp_ns: int, frame_id: str, image_format: str, data: bytes) -> bytes:
     """The bytes `foxglove.CompressedImage(timestamp, frame_id, data, format).SerializeToString()` gives, built with
     one copy of `data` (protobuf copies a frame twice: into the message, then out of it; at 100 fps of 640x480 that
     was about 1 % of a core). Fields in number order, defaults (0, empty) left out, as protobuf writes them; the
     timestamp sub-message is always present (the recorder always sets it)."""
-    seconds, nanos = divmod(int(timestamp_ns), 1_000_000_000)
-    if not -(1 << 63) <= seconds < (1 << 63):
-        raise OverflowError(f"timestamp {timestamp_ns} ns out of range")
-    stamp = (b"\x08" + _varint(seconds) if seconds else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+    stamp = _timestamp(timestamp_ns)
     values = {"timestamp": stamp, "frame_id": frame_id.encode("utf-8"), "data": data,
               "format": image_format.encode("utf-8")}
     parts = []
@@ -47,10 +52,7 @@ def raw_image_payload(timestamp_ns: int, frame_id: str, width: int, height: int,
     """The bytes `foxglove.RawImage(timestamp, frame_id, width, height, encoding, step, data).SerializeToString()`
     gives, with one copy of `data` (as `compressed_image_payload`; checked against protobuf in the tests). Fields
     in number order: timestamp 1, width 2, height 3 (fixed32), encoding 4, step 5 (fixed32), data 6, frame_id 7."""
-    seconds, nanos = divmod(int(timestamp_ns), 1_000_000_000)
-    if not -(1 << 63) <= seconds < (1 << 63):
-        raise OverflowError(f"timestamp {timestamp_ns} ns out of range")
-    stamp = (b"\x08" + _varint(seconds) if seconds else b"") + (b"\x10" + _varint(nanos) if nanos else b"")
+    stamp = _timestamp(timestamp_ns)
     name = encoding.encode("utf-8")
     frame = frame_id.encode("utf-8")
     parts = [b"\x0a", _varint(len(stamp)), stamp]
