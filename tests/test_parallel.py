@@ -9,6 +9,7 @@ import pytest
 
 from analysis.parallel import default_jobs, parallel_map
 from hamr_bench.errors import ConfigError
+from tests.dask_cluster import in_process_cluster
 
 
 def _square_and_pid(x: int) -> tuple[int, int]:
@@ -55,16 +56,8 @@ def test_empty_and_bad_arguments():
 
 @pytest.fixture(scope="module")
 def dask_client():
-    distributed = pytest.importorskip("distributed")
-    # threads, not processes: the cluster starts in well under a second; the scheduler and the client still talk
-    # over loopback TCP, so the address path is the one a real cluster uses
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
-                                       host="127.0.0.1",
-                                       dashboard_address=None, silence_logs=40)
-    client = distributed.Client(cluster)
-    yield client
-    client.close()
-    cluster.close()
+    with in_process_cluster() as client:
+        yield client
 
 
 def test_dask_cluster_by_client_and_by_address(dask_client):

@@ -14,6 +14,7 @@ from analysis.gap.problem import Problem
 from analysis.gap.selfcheck import Trial, run_trial, score
 from hamr_bench.cli import main
 from hamr_bench.protocols.session import RunRequest, run_protocol
+from tests.dask_cluster import in_process_cluster
 
 BLOCKED = ["voltages_V=100,150,200,250", "repetitions=2", "drive.cycles=2"]
 
@@ -175,13 +176,6 @@ def test_recordings_read_in_parallel_give_the_same_rows(recordings):
                 np.testing.assert_array_equal(value, b.__dict__[key])
             else:
                 assert value == b.__dict__[key] or (value != value and b.__dict__[key] != b.__dict__[key]), key
-    distributed = pytest.importorskip("distributed")
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
-                                       host="127.0.0.1",
-                                       dashboard_address=None, silence_logs=40)
-    try:
-        with distributed.Client(cluster) as client:
-            on_dask = load_gap_data(paths, scheduler=client.scheduler.address)
-        assert len(on_dask.rows) == len(serial.rows)
-    finally:
-        cluster.close()
+    with in_process_cluster() as client:
+        on_dask = load_gap_data(paths, scheduler=client.scheduler.address)
+    assert len(on_dask.rows) == len(serial.rows)
