@@ -30,15 +30,16 @@ import hashlib
 import json
 import math
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hamr_bench.errors import ConfigError, RecordingError
-from hamr_bench.protocols.plan import Home, SetVoltages, Step, Tare
+from hamr_bench.protocols.plan import FindContact, Home, SetVoltages, Step, Tare
 from hamr_bench.protocols.replay_plan import Note, ReplayDrive, StageCommand, WaitUntil
+from hamr_bench.protocols.runner import FORCE_WINDOW_S
 
 STAGE_TOLERANCE_M = 1e-6
 TARE_LEAD_S = 3.0       # longer than a tare takes (leg rig ~0.4 s: stream stop + drain + restart; Nano17 ~1 s)
@@ -46,6 +47,8 @@ DRIVE_LEAD_S = 0.01     # longer than an amplifier takes to arm a waveform after
 STEP_LEAD_S = 0.05      # longer than the stage check the runner makes before it records a step (~10 ms)
 MAX_RESAMPLED_RATE_HZ = 1000.0  # an imported trace's drive is resampled to at most this rate
 DRIVE_REST_V = 0.5      # an imported drive below this is at rest (a monitor's noise is ~0.1 V)
+CONTACT_STEP_S = 0.1    # more than a stage step takes on the rigs (allowance for an imported trace's search)
+HOME_ALLOWANCE_S = 10.0  # more than homing takes from the actuator's contact (a few mm at the stage's speed)
 MONITOR_TOPICS = ("/amplifier/bias/monitor", "/amplifier/drive/monitor")
 CAMERA_TOPICS = ("/camera/displacement", "/camera/image")
 
@@ -136,12 +139,42 @@ def read_replay_source(path: Path | str) -> ReplaySource:
         seed=_int_or_none(run_md.get("seed")), effects=effects, exit_status=exit_status,
         exit_reason=reader.exit_reason or (run_end[-1].message if run_end else "") or "",
         start_s=start_s, end_s=end_s)
-    source.items = _build_items(reader, events)
+    source.items = _build_items(reader, events, source.fixture)
     source.steps = sum(1 for e in events if e.kind == "step")
     return source
 
 
-def _build_items(reader: Any, events: list[Any]) -> list[Any]:
+def _contact_moves(reader: Any, events: list[Any], fixture: str) -> list[tuple[float, Any, float]]:
+    """(time, operation, allowance_s): how the twin puts its sensor where an imported actuator trace's steps had
+    it, when the trace has no stage positions: the lab's sensor touched the tip in blocked (and stiffness) steps and
+    was clear of it in free ones. The twin finds contact with the actuator protocol's own search before the first
+    touching step (and again after a free step), and homes (clear) before a free step after touching ones. Each is
+    given an allowance (a worst-case duration: the steps after it are replayed that much later, so the search never
+    makes the twin skip drive samples); `compare` aligns steps by their starts, so the shift does not matter there."""
+    if fixture != "actuator" or any(t in reader.topics() for t in ("/stage/command", "/stage/position")):
+        return []
+    from hamr_bench.protocols.actuator import Params
+
+    c = Params().contact
+    n_steps = c.max_travel_m / c.coarse_step_m + 2 * (c.clearance_m + 2 * c.coarse_step_m) / c.fine_step_m
+    search_s = n_steps * (FORCE_WINDOW_S + CONTACT_STEP_S)
+    search = FindContact(c.threshold_N, c.coarse_step_m, c.fine_step_m, c.max_travel_m, clearance_m=c.clearance_m)
+    out = []
+    touching = False
+    for e in events:
+        if e.kind != "step":
+            continue
+        mode = e.data.get("mode", "")
+        if mode in ("blocked", "stiffness") and not touching:
+            out.append((e.time_s - STEP_LEAD_S - DRIVE_LEAD_S, search, search_s))
+            touching = True
+        elif mode == "free" and touching:
+            out.append((e.time_s - STEP_LEAD_S - DRIVE_LEAD_S, Home(), HOME_ALLOWANCE_S))
+            touching = False
+    return out
+
+
+def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[Any]:
     timed: list[tuple[float, int, int, Any]] = []  # (anchor time, order key, sequence, item-with-wait)
     seq = 0
 
@@ -183,6 +216,9 @@ def _build_items(reader: Any, events: list[Any]) -> list[Any]:
         for e in events:
             if e.kind == "step" and isinstance(e.data.get("voltage_V"), (int, float)):
                 add(e.time_s, 0, "note_after", SetVoltages(float(e.data["voltage_V"]), 0.0))
+    moves = _contact_moves(reader, events, fixture)
+    for t, item, _allowance in moves:
+        add(t, -1, "chain", item)
     timed.sort(key=lambda x: (x[0], x[1], x[2]))
     if "home" not in kinds:  # an imported trace: reference the stage and zero the sensor first
         timed.insert(0, (-math.inf, -1, -2, ("chain", Home(), -math.inf)))
@@ -201,13 +237,20 @@ def _build_items(reader: Any, events: list[Any]) -> list[Any]:
     camera = _times(reader, CAMERA_TOPICS)
     items: list[Any] = []
     previous_s = -math.inf
+
+    def shift(t: float) -> float:
+        """Source time -> twin time: later by the allowances of the contact moves before it."""
+        return t + sum(allowance for at, _item, allowance in moves if at <= t)
+
     for anchor_s, _prio, _seq, (kind, item, wait_to) in timed:
+        if isinstance(item, ReplayDrive) and moves:
+            item = replace(item, start_s=shift(item.start_s))
         if kind in ("pre", "post") and math.isfinite(wait_to):
             lo = int(np.searchsorted(monitors, previous_s, side="left"))
             hi = int(np.searchsorted(monitors, anchor_s - 1e-12, side="left"))
             passes = tuple(float(x) for x in monitors[lo:hi])
             items.append(WaitUntil(
-                wait_to, pass_times_s=passes,
+                shift(wait_to), pass_times_s=passes,
                 poll_force=runner_made and not passes and _any_between(force, previous_s, anchor_s),
                 after_query=bool(items) and isinstance(items[-1], Tare),
                 dwell=not runner_made, track=_any_between(camera, previous_s, anchor_s)))
@@ -282,7 +325,18 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
     if monitored is None:
         raise RecordingError(f"{reader.path}: drive_start events but neither /amplifier/drive/command nor "
                              "/amplifier/drive/monitor to replay the waveform from")
-    t, v = monitored
+    # The drive as the recording contract infers it from the monitor (each cycle's corners and level): the
+    # waveform the monitor measured, without its noise and overshoot, which the twin's amplifier would otherwise
+    # be told to reproduce. Where no cycle is found, the monitor itself.
+    from hamr_bench.recording.steps import parse_run
+
+    timelines = parse_run(reader).timelines
+    if timelines.sources.get("drive") == "inferred" and timelines.drive[0].size:
+        knots_t, knots_v = timelines.drive
+        t = monitored[0]
+        v = np.interp(t, knots_t, knots_v, left=0.0, right=0.0)
+    else:
+        t, v = monitored
     for i in starts:
         e = events[i]
         rate = float(e.data.get("sample_rate_Hz", 0.0))
