@@ -66,19 +66,14 @@ def _label(text: str) -> str:
 
 
 def _labels(table: Table, column: str, default: str) -> list[str]:
-    """Per row, the column's label; a blank cell holds the label above it (a spreadsheet's merged cells)."""
+    """Per row, the column's label; a blank cell holds the label above it (a spreadsheet's merged cells), and
+    blank cells before any label take `default` (no specimen named: '')."""
     if not table.has(column):
         return [default] * len(table.rows)
-    out, last = [], None
-    for (line, _row), text in zip(table.rows, table.cells(column), strict=True):
+    out, last = [], default
+    for text in table.cells(column):
         if text:
             last = _label(text)
-        elif last is None:
-            if default:
-                last = default
-            else:
-                raise ConfigError(f"{table.path}:{line}: column {column}: blank on the first data row (name the "
-                                  f"{column} of the rows below it)")
         out.append(last)
     return out
 
@@ -282,8 +277,8 @@ def read_trace(path: Path, protocol: str = "blocked-force", session: str | None 
         bad = np.flatnonzero(np.diff(seg) <= 0)
         if bad.size:
             line = table.rows[b.start + int(bad[0]) + 1][0]
-            raise ConfigError(f"{path}:{line}: column time_s: {seg[bad[0] + 1]!r} does not increase (previous "
-                              f"{seg[bad[0]]!r})")
+            raise ConfigError(f"{path}:{line}: column time_s: {float(seg[bad[0] + 1])!r} does not increase "
+                              f"(previous {float(seg[bad[0]])!r})")
         gap = max(BLOCK_GAP_S, 100.0 * dt)
         offset = 0.0 if seg[0] >= last + gap else last + gap - seg[0]
         offsets.append(offset)
@@ -403,7 +398,8 @@ def import_trace(csv_path: Path, out_path: Path, protocol: str, design: int | No
         v = trace.columns["voltage_V"]
         ok = np.isfinite(v)
         stats = waveform_stats(v[ok]) if ok.sum() >= 3 else None
-        if stats is not None and float(np.percentile(v[ok], 0.1)) < stats.ground_V - 0.5 * stats.range_V:
+        below = stats.ground_V - float(np.percentile(v[ok], 0.1)) if stats is not None else 0.0
+        if stats is not None and below > max(2.0 * stats.range_V, 10.0 * stats.noise_V):
             raise ConfigError(f"{csv_path}: column voltage_V: the drive swings below ground more than above it "
                               "(expected ground -> V_bias trapezoids; a monitor of inverted sign?)")
         cycles = infer_cycles(t[ok], v[ok], stats=stats) if stats is not None else []

@@ -5,9 +5,10 @@ cycle), so that a recording without a command stream gets the same per-cycle win
 
 How (docs/log-format.md, "Drive timing"):
 - noise: the robust scatter of successive differences (MAD / 0.6745 / sqrt 2); one-sample spikes and dropouts
-  are removed by a 3-sample median before anything is detected (it leaves ramps and flat tops unchanged);
-- ground: the median of the samples near the lowest percentile; a burst is a run of samples above ground +
-  max(6 noise, 1 % of the range);
+  are removed by a 3-sample median, and noisy data are smoothed by a 5-sample moving average, before anything is
+  detected (both leave ramps and flat tops unchanged; the line fits below use the raw samples);
+- ground: the median of the samples near the lowest percentile; a burst is a run of smoothed samples above
+  ground + max(6 x the smoothed signal's noise, 1 % of the range);
 - a burst's level: the median of its flat top (refined to the samples between the fitted corners);
 - each ramp: a least-squares line through its samples between 20 % and 80 % of the level (outliers of the raw
   signal from the filtered one left out), so a ramp of any length and a rounded or overshooting corner give the
@@ -33,6 +34,7 @@ OUTLIER_SIGMAS = 5.0
 PAUSE_FACTOR = 1.5           # a pause this many times the median pause is a pause between steps, not a low dwell
 RINGING_FRACTION = 0.25      # a burst below this fraction of a neighbour's height, close to it, is its ringing
 GAP_FACTOR = 20.0            # a sampling gap this many times the median spacing cuts the waveform
+SMOOTH_SAMPLES = 5           # moving average of the detection signal on noisy data
 
 
 @dataclass(frozen=True)
@@ -93,12 +95,21 @@ def median3(x: np.ndarray) -> np.ndarray:
 
 
 def waveform_stats(v: np.ndarray) -> WaveformStats:
-    vf = median3(v)
+    """Ground level, noise and range of a drive waveform.
+
+    Ground: on exact data the lowest level; on noisy data the 5th percentile corrected by 1.645 sigma (the 5th
+    percentile of noise around ground, when the drive spends at least ~10 % of its time at ground), then the
+    median of the raw samples within 2 sigma of that (a level a few sigma above ground barely reaches in)."""
+    v = np.asarray(v, dtype=float)
     sigma = noise_sigma(v)
-    lo, hi = float(np.percentile(vf, 1.0)), float(np.percentile(vf, 99.9))
-    band = max(8.0 * sigma, 0.02 * (hi - lo))
-    near = vf[vf <= lo + band]
-    ground = float(np.median(near)) if near.size else lo
+    hi = float(np.percentile(median3(v), 99.9))
+    if sigma == 0.0:
+        lo = float(np.min(v))
+        ground = float(np.median(v[v <= lo + 1e-9 * max(hi - lo, 1.0)]))
+    else:
+        g0 = float(np.percentile(v, 5.0)) + 1.645 * sigma
+        near = v[np.abs(v - g0) <= 2.0 * sigma]
+        ground = float(np.median(near)) if near.size else g0
     return WaveformStats(ground, sigma, hi - ground)
 
 
@@ -117,15 +128,27 @@ def _line(t: np.ndarray, v: np.ndarray) -> tuple[float, float] | None:
     return float(a - b * t[0]), float(b)
 
 
+def smoothed(v: np.ndarray, noisy: bool) -> np.ndarray:
+    """The detection signal: a 3-sample median (spikes, dropouts) then, on noisy data, a SMOOTH_SAMPLES moving
+    average (noise / sqrt(5), so a small step in a lot of noise is still found; a linear ramp is unchanged)."""
+    vf = median3(v)
+    if not noisy or vf.size < SMOOTH_SAMPLES:
+        return vf
+    k = SMOOTH_SAMPLES // 2
+    padded = np.r_[np.full(k, vf[0]), vf, np.full(k, vf[-1])]
+    return np.convolve(padded, np.ones(SMOOTH_SAMPLES) / SMOOTH_SAMPLES, mode="valid")
+
+
 class _Edges:
-    """Corner finding on one waveform (filtered for detection, raw for the line fits)."""
+    """Corner finding on one waveform (the smoothed signal for detection, the raw one for the line fits)."""
 
     def __init__(self, t: np.ndarray, v: np.ndarray, stats: WaveformStats) -> None:
         self.t, self.v = t, v
-        self.vf = median3(v)
+        self.vf = smoothed(v, stats.noise_V > 0)
         self.g = stats.ground_V
         self.sigma = stats.noise_V
-        self.ok = np.abs(v - self.vf) <= max(OUTLIER_SIGMAS * self.sigma, 1e-12 * max(stats.range_V, 1.0))
+        # a raw sample far from its neighbours' median is a spike: left out of the line fits
+        self.ok = np.abs(v - median3(v)) <= max(OUTLIER_SIGMAS * self.sigma, 1e-12 * max(stats.range_V, 1.0))
 
     def _fit(self, i_lo: int, i_hi: int, level: float) -> tuple[float, float] | None:
         """Line through the ramp samples strictly between indices i_lo and i_hi (or through those two)."""
@@ -176,20 +199,32 @@ class _Edges:
 
 
 def _bursts(vf: np.ndarray, stats: WaveformStats) -> list[tuple[int, int]]:
-    thr = stats.ground_V + max(DETECT_NOISE_SIGMAS * stats.noise_V, DETECT_FRACTION * stats.range_V)
+    noise = stats.noise_V / math.sqrt(SMOOTH_SAMPLES)   # of the smoothed signal
+    thr = stats.ground_V + max(DETECT_NOISE_SIGMAS * noise, DETECT_FRACTION * stats.range_V)
     runs = _segments(vf > thr)
+    # noise on a slow ramp can dip back under the threshold: runs between which the signal never came down to
+    # ground are one burst
+    floor = stats.ground_V + max(3.0 * noise, 1e-9 * stats.range_V)
+    merged: list[tuple[int, int]] = []
+    for a, b in runs:
+        if merged and float(np.min(vf[merged[-1][1]:a])) > floor:
+            merged[-1] = (merged[-1][0], b)
+        else:
+            merged.append((a, b))
+    runs = merged
     if len(runs) < 2:
         return runs
     heights = [float(np.max(vf[a:b])) - stats.ground_V for a, b in runs]
     keep = []
     for k, (a, b) in enumerate(runs):
-        # ringing after an edge, or a glitch: small next to a neighbour and closer to it than that neighbour is long
+        # ringing after an edge, or a glitch: small and short next to a neighbour, and closer to it than that
+        # neighbour is long (a real cycle at a low level lasts as long as its neighbours)
         spurious = False
         for j in (k - 1, k + 1):
             if 0 <= j < len(runs) and heights[k] < RINGING_FRACTION * heights[j]:
                 ja, jb = runs[j]
                 gap = a - jb if j < k else ja - b
-                if gap <= (jb - ja):
+                if gap <= (jb - ja) and (b - a) < RINGING_FRACTION * (jb - ja):
                     spurious = True
         if not spurious:
             keep.append((a, b))
