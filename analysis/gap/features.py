@@ -66,6 +66,11 @@ class Row:
     ref_times_s: np.ndarray | None = None   # camera rows: the same cycles' low-dwell sample times (subtracted)
     ref_cycle: np.ndarray | None = None
     se: float = math.nan
+    # Standard error of the MODEL's value for this row that comes from an inferred drive (0 for a commanded one):
+    # the step's V_bias and the ramps' timing are measured, with the monitor's noise; propagated with the data's
+    # own sensitivities (value / V_bias for the level, the data's slope on a ramp for the timing). Independent of
+    # `se` (the data's pure error): the row's total is sqrt(se^2 + drive_se^2).
+    drive_se: float = 0.0
 
     @property
     def condition(self) -> tuple:
@@ -185,6 +190,7 @@ def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors:
     cycles = step.drive.cycles
     windows = [cycle_windows(c) for c in cycles]
     refs = [_samples_in(t_s, *w["low_late"]) for w in windows] if tracked else None
+    made: dict[str, Row] = {}
     for p in PHASES:
         if tracked and p == "low_late":
             continue
@@ -208,6 +214,27 @@ def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors:
                   **base)
         row._cycle_values = v  # type: ignore[attr-defined]
         run.rows.append(row)
+        made[p] = row
+    if step.drive.source == "inferred":
+        _drive_uncertainty(made, step.drive)
+
+
+def _drive_uncertainty(rows: dict[str, Row], drive: DriveTiming) -> None:
+    """`Row.drive_se` of one inferred step's rows: the level's error (shared by the step's cycles) scales every
+    row's value; a ramp's timing error (independent per cycle) moves a ramp row by the data's slope there."""
+    low = rows["low_late"].value if "low_late" in rows else 0.0
+    high = rows["high_early"].value if "high_early" in rows else math.nan
+    n = len(drive.cycles)
+    ramps = {"rise": (drive.ramp_up_s, [c.rise_se_s for c in drive.cycles]),
+             "fall": (drive.ramp_down_s, [c.fall_se_s for c in drive.cycles])}
+    for phase, row in rows.items():
+        level = abs(row.value) * drive.bias_se_V / drive.bias_V if drive.bias_V > 0 else 0.0
+        timing = 0.0
+        if phase in ramps and math.isfinite(high):
+            ramp_s, ses = ramps[phase]
+            slope = abs(high - low) / ramp_s if ramp_s > 0 else 0.0
+            timing = slope * math.sqrt(float(np.mean(np.square(ses)))) / math.sqrt(n) if ses else 0.0
+        row.drive_se = math.hypot(level, timing) if math.isfinite(level) and math.isfinite(timing) else 0.0
 
 
 def _hold_row(run: RunTrace, step: StepRecord, base: dict[str, Any], tf: np.ndarray, force: np.ndarray) -> None:

@@ -9,11 +9,13 @@ How (docs/log-format.md, "Drive timing"):
   detected (both leave ramps and flat tops unchanged; the line fits below use the raw samples);
 - ground: the median of the samples near the lowest percentile; a burst is a run of smoothed samples above
   ground + max(6 x the smoothed signal's noise, 1 % of the range);
-- a burst's level: the median of its flat top (refined to the samples between the fitted corners);
+- a burst's level: the mean of the raw samples of its flat top, between the fitted corners less 5 % (and two
+  samples) at each end, spikes left out; its standard error (noise / sqrt(samples)) is kept with it;
 - each ramp: a least-squares line through its samples between 20 % and 80 % of the level (outliers of the raw
   signal from the filtered one left out), so a ramp of any length and a rounded or overshooting corner give the
   same corners; the corners are where the line meets ground and the level; a triangle (no flat top) gets its
-  apex from the two lines' intersection;
+  apex from the two lines' intersection; the standard error of each ramp's mid-level crossing time (from the
+  noise and the samples the line rests on) is kept with the cycle;
 - a burst whose rise or fall is cut by the start or end of the data is an incomplete cycle (it belongs to the
   drive's history, not to a measured cycle);
 - a cycle's low dwell starts at the previous cycle's fall end, unless the pause is longer than 1.5 x the median
@@ -35,6 +37,7 @@ PAUSE_FACTOR = 1.5           # a pause this many times the median pause is a pau
 RINGING_FRACTION = 0.25      # a burst below this fraction of a neighbour's height, close to it, is its ringing
 GAP_FACTOR = 20.0            # a sampling gap this many times the median spacing cuts the waveform
 SMOOTH_SAMPLES = 5           # moving average of the detection signal on noisy data
+FLAT_MARGIN = 0.05           # of the flat top, left out at each corner when its level is averaged
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,10 @@ class Cycle:
     fall_end_s: float
     level_V: float
     complete: bool = True
+    level_se_V: float = 0.0      # standard error of level_V (monitor noise / sqrt(samples of the flat top))
+    level_samples: int = 0       # samples the level is the mean of
+    rise_se_s: float = 0.0       # standard error of the rise's mid-level crossing time (0 on an exact waveform)
+    fall_se_s: float = 0.0       # the same for the fall
 
     @property
     def dwell_low_s(self) -> float:
@@ -150,21 +157,28 @@ class _Edges:
         # a raw sample far from its neighbours' median is a spike: left out of the line fits
         self.ok = np.abs(v - median3(v)) <= max(OUTLIER_SIGMAS * self.sigma, 1e-12 * max(stats.range_V, 1.0))
 
-    def _fit(self, i_lo: int, i_hi: int, level: float) -> tuple[float, float] | None:
-        """Line through the ramp samples strictly between indices i_lo and i_hi (or through those two)."""
+    def _fit(self, i_lo: int, i_hi: int, level: float) -> tuple[float, float, float] | None:
+        """Line v = c + s t through the ramp samples strictly between indices i_lo and i_hi (or through those
+        two), and the standard error of the time it crosses mid-level (from the noise and the samples used)."""
         h = level - self.g
         idx = np.arange(i_lo + 1, i_hi) if i_hi > i_lo else np.arange(i_hi + 1, i_lo)
         if idx.size:
             frac = (self.vf[idx] - self.g) / h
             idx = idx[(frac > EDGE_LO - 0.05) & (frac < EDGE_HI + 0.05) & self.ok[idx]]
         fit = _line(self.t[idx], self.v[idx]) if idx.size >= 2 else None
-        if fit is None:
-            a, b = sorted((i_lo, i_hi))
-            fit = _line(self.t[[a, b]], self.vf[[a, b]])
-        return fit
+        if fit is not None:
+            tt = self.t[idx]
+            t_mid = (self.g + 0.5 * h - fit[0]) / fit[1]
+            sxx = float(np.sum((tt - tt.mean()) ** 2))
+            se = self.sigma / abs(fit[1]) * math.sqrt(1.0 / tt.size + (t_mid - tt.mean()) ** 2 / sxx)
+            return fit[0], fit[1], se
+        a, b = sorted((i_lo, i_hi))
+        fit = _line(self.t[[a, b]], self.vf[[a, b]])
+        # two samples across the whole ramp: the crossing is known to about a sample spacing
+        return None if fit is None else (fit[0], fit[1], float(self.t[b] - self.t[a]) / math.sqrt(12.0))
 
-    def rise(self, a: int, b: int, lo_bound: int, level: float) -> tuple[float, float] | None:
-        """(ramp start, ramp end) of the rise into burst [a, b); None when cut by the data's start."""
+    def rise(self, a: int, b: int, lo_bound: int, level: float) -> tuple[float, float, float] | None:
+        """(ramp start, ramp end, timing SE) of the rise into burst [a, b); None when cut by the data's start."""
         h = level - self.g
         above = np.flatnonzero(self.vf[a:b] >= self.g + EDGE_HI * h)
         if above.size == 0:
@@ -177,11 +191,11 @@ class _Edges:
         fit = self._fit(i20, i80, level)
         if fit is None or fit[1] <= 0:
             return None
-        c, s = fit
-        return (self.g - c) / s, (level - c) / s
+        c, s, se = fit
+        return (self.g - c) / s, (level - c) / s, se
 
-    def fall(self, a: int, b: int, hi_bound: int, level: float) -> tuple[float, float] | None:
-        """(ramp start, ramp end) of the fall out of burst [a, b); None when cut by the data's end."""
+    def fall(self, a: int, b: int, hi_bound: int, level: float) -> tuple[float, float, float] | None:
+        """(ramp start, ramp end, timing SE) of the fall out of burst [a, b); None when cut by the data's end."""
         h = level - self.g
         above = np.flatnonzero(self.vf[a:b] >= self.g + EDGE_HI * h)
         if above.size == 0:
@@ -194,8 +208,8 @@ class _Edges:
         fit = self._fit(i80, i20, level)
         if fit is None or fit[1] >= 0:
             return None
-        c, s = fit
-        return (level - c) / s, (self.g - c) / s
+        c, s, se = fit
+        return (level - c) / s, (self.g - c) / s, se
 
 
 def _bursts(vf: np.ndarray, stats: WaveformStats) -> list[tuple[int, int]]:
@@ -241,9 +255,9 @@ def _snap(x: float, t: np.ndarray, tol: float) -> float:
 
 
 def _segment_cycles(t: np.ndarray, v: np.ndarray, stats: WaveformStats
-                    ) -> list[tuple[float, float, float, float, float, bool]]:
-    """(rise start, high start, fall start, fall end, level above ground, complete) per burst of one gap-free
-    stretch of samples."""
+                    ) -> list[tuple[float, float, float, float, float, bool, int, tuple[float, float]]]:
+    """(rise start, high start, fall start, fall end, level above ground, complete, samples in the level) per
+    burst of one gap-free stretch of samples."""
     edges = _Edges(t, v, stats)
     bursts = _bursts(edges.vf, stats)
     exact = stats.noise_V == 0.0
@@ -255,20 +269,21 @@ def _segment_cycles(t: np.ndarray, v: np.ndarray, stats: WaveformStats
         top = np.percentile(edges.vf[a:b], 90)
         level = float(np.median(edges.vf[a:b][edges.vf[a:b] >= stats.ground_V + 0.9 * (top - stats.ground_V)]))
         rise = fall = None
+        n_flat = 0
         for _ in range(2):   # corners from the level, then the level from the samples between the corners
             rise = edges.rise(a, b, lo_bound, level)
             fall = edges.fall(a, b, hi_bound, level)
             lo_t = rise[1] if rise else t[a]
             hi_t = fall[0] if fall else t[b - 1]
-            flat = edges.vf[(t >= lo_t) & (t <= hi_t)]
-            if flat.size < 3 or not hi_t > lo_t:
+            # the raw samples of the flat top, less a margin at each corner (a monitor rings there), less spikes
+            margin = max(2.0 * dt, FLAT_MARGIN * (hi_t - lo_t))
+            flat = (t >= lo_t + margin) & (t <= hi_t - margin) & edges.ok
+            if flat.sum() < 3:
                 break
-            new = float(np.median(flat))
-            if abs(new - level) <= max(stats.noise_V, 1e-12 * abs(level)):
-                break
-            level = new
-        rise_start, high_start = rise if rise else (float(t[0]), float(t[0]))
-        fall_start, fall_end = fall if fall else (float(t[-1]), float(t[-1]))
+            level, n_flat = float(np.mean(v[flat])), int(flat.sum())
+        rise_start, high_start = rise[:2] if rise else (float(t[0]), float(t[0]))
+        fall_start, fall_end = fall[:2] if fall else (float(t[-1]), float(t[-1]))
+        timing_se = (rise[2] if rise else math.nan, fall[2] if fall else math.nan)
         if rise and fall and high_start > fall_start:
             # no flat top (a triangle): the apex is where the two ramp lines meet
             s_up = (level - stats.ground_V) / (high_start - rise_start)
@@ -282,7 +297,7 @@ def _segment_cycles(t: np.ndarray, v: np.ndarray, stats: WaveformStats
             rise_start, high_start, fall_start, fall_end = (_snap(x, t, tol)
                                                             for x in (rise_start, high_start, fall_start, fall_end))
         out.append((rise_start, high_start, fall_start, fall_end, level - stats.ground_V,
-                    rise is not None and fall is not None))
+                    rise is not None and fall is not None, n_flat, timing_se))
     return out
 
 
@@ -305,7 +320,7 @@ def infer_cycles(time_s: np.ndarray, volts: np.ndarray, start_s: float | None = 
     dts = np.diff(t)
     cuts = np.flatnonzero(dts > GAP_FACTOR * float(np.median(dts))) + 1
     bounds = [0, *cuts.tolist(), t.size]
-    raw: list[tuple[float, float, float, float, float, bool]] = []
+    raw: list[tuple[float, float, float, float, float, bool, int, tuple[float, float]]] = []
     seg_of: list[int] = []
     for k in range(len(bounds) - 1):
         a, b = bounds[k], bounds[k + 1]
@@ -317,7 +332,7 @@ def infer_cycles(time_s: np.ndarray, volts: np.ndarray, start_s: float | None = 
               if raw[k][5] and raw[k - 1][5] and seg_of[k] == seg_of[k - 1]]
     typical = float(np.median(pauses)) if pauses else None
     cycles = []
-    for k, (rs, hs, fs, fe, level, complete) in enumerate(raw):
+    for k, (rs, hs, fs, fe, level, complete, n_flat, (rise_se, fall_se)) in enumerate(raw):
         if k and seg_of[k] == seg_of[k - 1]:
             before = raw[k - 1][3]
         else:
@@ -327,5 +342,8 @@ def infer_cycles(time_s: np.ndarray, volts: np.ndarray, start_s: float | None = 
         if typical is not None and rs - before > PAUSE_FACTOR * typical:
             low = rs - typical
         low = min(max(low, before), rs)
-        cycles.append(Cycle(low, rs, hs, fs, fe, level, complete))
+        se = stats.noise_V / math.sqrt(n_flat) if n_flat else math.nan
+        exact = stats.noise_V == 0
+        cycles.append(Cycle(low, rs, hs, fs, fe, level, complete, 0.0 if exact else se, n_flat,
+                            0.0 if exact else rise_se, 0.0 if exact else fall_se))
     return cycles

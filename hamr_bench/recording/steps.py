@@ -45,6 +45,7 @@ class DriveTiming:
     bias_V: float                       # V_bias: the median high level of the cycles (nan without one)
     cycles: tuple[Cycle, ...]           # complete cycles only, in time order
     incomplete: int = 0                 # cycles of this step cut by the start or end of the data
+    bias_se_V: float = 0.0              # standard error of an inferred bias_V (0 for a commanded one)
 
     def _median(self, name: str) -> float:
         return float(np.median([getattr(c, name) for c in self.cycles])) if self.cycles else math.nan
@@ -70,7 +71,8 @@ class DriveTiming:
         def num(x: float) -> float | None:
             return round(x, 6) if math.isfinite(x) else None
 
-        return {"source": self.source, "bias_V": num(self.bias_V), "cycles": len(self.cycles),
+        return {"source": self.source, "bias_V": num(self.bias_V), "bias_se_V": num(self.bias_se_V),
+                "cycles": len(self.cycles),
                 "incomplete_cycles": self.incomplete, "dwell_low_s": num(self.dwell_low_s),
                 "ramp_up_s": num(self.ramp_up_s), "dwell_high_s": num(self.dwell_high_s),
                 "ramp_down_s": num(self.ramp_down_s)}
@@ -201,9 +203,17 @@ def _commanded_drive(t: np.ndarray, v: np.ndarray, start: Any) -> DriveTiming | 
 
 
 def _timing(source: str, cycles: list[Cycle]) -> DriveTiming:
+    """A step's drive: its complete cycles, V_bias the mean of all their flat-top samples (a setpoint held through
+    the step; pooling the cycles makes an inferred level as precise as the monitor allows) and its standard
+    error."""
     complete = tuple(c for c in cycles if c.complete)
-    bias = float(np.median([c.level_V for c in complete])) if complete else math.nan
-    return DriveTiming(source, bias, complete, len(cycles) - len(complete))
+    if not complete:
+        return DriveTiming(source, math.nan, (), len(cycles))
+    n = np.array([max(c.level_samples, 1) for c in complete], dtype=float)
+    levels = np.array([c.level_V for c in complete])
+    bias = float(np.sum(n * levels) / np.sum(n))
+    se = float(np.sqrt(np.sum((n * np.array([c.level_se_V for c in complete])) ** 2)) / np.sum(n))
+    return DriveTiming(source, bias, complete, len(cycles) - len(complete), se)
 
 
 def _data_span(reader: Any, events: list[Any]) -> tuple[float, float]:
@@ -325,14 +335,17 @@ def sorted_stream(reader: Any, topic: str, name: str) -> tuple[np.ndarray, np.nd
 
 
 # ----------------------------------------------------------------------------------------------- timelines
-def _trapezoids(cycles: list[Cycle]) -> tuple[np.ndarray, np.ndarray]:
+def _trapezoids(cycles: list[Cycle], steps: list[StepRecord]) -> tuple[np.ndarray, np.ndarray]:
     """The drive through each cycle's corners (ground 0 V), ramps sampled finely: read with a zero-order hold it
-    is the inferred waveform, as a command stream is read."""
+    is the inferred waveform, as a command stream is read. A cycle of a step is at the step's V_bias (the pooled
+    level), any other (cut by the data's edges) at its own."""
+    level_of = {c.rise_start_s: s.drive.bias_V for s in steps if s.drive is not None for c in s.drive.cycles}
     ts: list[np.ndarray] = []
     vs: list[np.ndarray] = []
     for c in cycles:
-        for a, va, b, vb in ((c.rise_start_s, 0.0, c.high_start_s, c.level_V),
-                             (c.fall_start_s, c.level_V, c.fall_end_s, 0.0)):
+        level = level_of.get(c.rise_start_s, c.level_V)
+        for a, va, b, vb in ((c.rise_start_s, 0.0, c.high_start_s, level),
+                             (c.fall_start_s, level, c.fall_end_s, 0.0)):
             if b > a:
                 n = max(2, int(math.ceil((b - a) / min(INFERRED_RAMP_DT_S, (b - a) / 20.0))) + 1)
                 ts.append(np.linspace(a, b, n))
@@ -366,7 +379,7 @@ def _timelines(reader: Any, steps: list[StepRecord], monitor_cycles: list[Cycle]
     if commanded:
         sources["drive"] = COMMANDED
     elif monitor_cycles:
-        drive, sources["drive"] = _trapezoids(monitor_cycles), INFERRED
+        drive, sources["drive"] = _trapezoids(monitor_cycles, steps), INFERRED
     else:
         drive, sources["drive"] = empty, ABSENT
     bias = _stream(reader, Topic.BIAS_COMMAND, "voltage_V")

@@ -19,7 +19,7 @@ import csv
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import cont2discrete, lfilter, lfilter_zi
 
 # Table I "effective" values (paper), per actuator
 T_P, L, W_NOM, L_R, W_R, D31, E_P, E_C, T_CF_LAYER = 155e-6, 9.6e-3, 3.4e-3, 0.0063, 1.5, 0.36e-9, 34e9, 340e9, 30e-6
@@ -62,7 +62,7 @@ class Lab:
     cycles: int = 4
     rate_Hz: float = 500.0
     lead_s: float = 0.25              # ground before the first cycle
-    tail_s: float = 0.2
+    tail_s: float = 0.2               # negative: the data end inside the last cycle
     monitor_noise_V: float = 0.6
     monitor_lag_s: float = 0.004      # second-order monitor: natural period ~ this, damping below
     monitor_damping: float = 0.45     # < 1: overshoots at each corner
@@ -121,20 +121,13 @@ def _creep(t: np.ndarray, u: np.ndarray, fraction: float) -> np.ndarray:
 
 
 def _monitor(v: np.ndarray, lab: Lab, rng: np.random.Generator) -> np.ndarray:
-    """A second-order amplifier monitor (lags, overshoots at corners) plus noise."""
-    dt = 1.0 / lab.rate_Hz
+    """A second-order amplifier monitor, w^2 / (s^2 + 2 z w s + w^2) (lags, overshoots at corners when z < 1),
+    discretised with a zero-order hold, plus white noise."""
     w = 2 * np.pi / max(lab.monitor_lag_s, 1e-9)
-    z = lab.monitor_damping
-    # bilinear-free simple discretisation: semi-implicit Euler on x'' = w^2 (v - x) - 2 z w x'
-    x, xd = 0.0, 0.0
-    out = np.empty_like(v)
-    sub = max(1, int(np.ceil(dt * w / 0.2)))
-    h = dt / sub
-    for i, vi in enumerate(v):
-        for _ in range(sub):
-            xd += h * (w * w * (vi - x) - 2 * z * w * xd)
-            x += h * xd
-        out[i] = x
+    num_d, den_d, _dt = cont2discrete(([w * w], [1.0, 2 * lab.monitor_damping * w, w * w]), 1.0 / lab.rate_Hz,
+                                      method="zoh")
+    b = np.ravel(num_d)
+    out = lfilter(b, den_d, v, zi=lfilter_zi(b, den_d) * v[0])[0]   # settled at the first sample's value
     return out + rng.normal(0.0, lab.monitor_noise_V, v.size)
 
 
