@@ -28,16 +28,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from analysis.sessions import session_key
-from hamr_bench.errors import ConfigError, HamrBenchError, RecordingError
+from hamr_bench.errors import ConfigError, HamrBenchError
 from hamr_bench.recording.contract import EventKind, Topic
 from hamr_bench.recording.drive_timing import Cycle, infer_cycles
 from hamr_bench.recording.run_metadata import RunMetadata
-from hamr_bench.recording.steps import Block, ParsedRun, StepRecord, open_reader, parse_run, sorted_stream
+from hamr_bench.recording.steps import StepRecord, open_reader, parse_run, sorted_stream
 
 FORCE_WINDOW_S = 0.1          # the runner's averaging window during the contact search
 DEFAULT_SETTLE_FRACTION = 0.5  # of a plateau, when the recording does not say how long to let it settle
@@ -130,10 +131,7 @@ class Dataset:
             ok = True
             for k, v in where.items():
                 have = getattr(o, k)
-                if isinstance(v, (tuple, list, set)):
-                    ok = have in v
-                else:
-                    ok = have == v
+                ok = have in v if isinstance(v, (tuple, list, set)) else have == v
                 if not ok:
                     break
             if ok:

@@ -467,14 +467,14 @@ def _write_trace(rec: Any, trace: Trace, found: list[FoundStep], zeros: dict[int
         if protocol != "static" and s.cycles:
             # the drive spans the step (to the next step's start), as replay plays it: the next step's
             # operations then follow the drive's end, as the rows show them
-            a, b = max(s.cycles[0].low_start_s, s.start_s), s.end_s
-            i0, i1 = int(np.searchsorted(t, a, "left")), int(np.searchsorted(t, b, "right"))
+            t_a, t_b = max(s.cycles[0].low_start_s, s.start_s), s.end_s
+            i0, i1 = int(np.searchsorted(t, t_a, "left")), int(np.searchsorted(t, t_b, "right"))
             rate = (i1 - i0 - 1) / (t[i1 - 1] - t[i0]) if i1 - i0 > 1 and t[i1 - 1] > t[i0] else 0.0
             timing = _summary(s.cycles)
-            rec.write_event(a, EventKind.DRIVE_START, n, "drive timing inferred from voltage_V",
+            rec.write_event(t_a, EventKind.DRIVE_START, n, "drive timing inferred from voltage_V",
                             sample_rate_Hz=rate, n_samples=int(i1 - i0), peak_V=round(s.level_V, 6),
                             track=protocol == "free-displacement" or s.mode == "free", timing="inferred", **timing)
-            rec.write_event(b, EventKind.DRIVE_END, n, "")
+            rec.write_event(t_b, EventKind.DRIVE_END, n, "")
     rec.write_event(float(t[-1]), EventKind.RUN_END, 0, "imported", exit_status="success")
 
 

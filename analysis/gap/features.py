@@ -33,7 +33,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -195,7 +196,7 @@ def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors:
         if tracked and p == "low_late":
             continue
         vals, pts = [], []
-        for c, w in enumerate(windows):
+        for w in windows:
             ref = _mean_in(t_s, y_s, *w["low_late"]) if tracked else 0.0
             vals.append(_mean_in(t_s, y_s, *w[p]) - ref)
             pts.append(_samples_in(t_s, *w[p]))
@@ -315,7 +316,7 @@ def load_runs(path: Path | str, first_index: int = 0) -> list[RunTrace]:
         if len(blocks) > 1:
             run.t_end_s = block.end_s
         sensors = {"force_N": (tf, force), "displacement_m": (tc, disp)}
-        for n, step in enumerate(steps):
+        for step in steps:
             base = dict(run=run.index, protocol=step.protocol, mode=step.mode, voltage_V=step.voltage_V,
                         sag_m=step.sag_m, repetition=step.repetition, direction=step.direction, step=step.index)
             if step.kind == "driven":

@@ -122,7 +122,7 @@ def waveform_stats(v: np.ndarray) -> WaveformStats:
 
 def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
     d = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
 
 
 def _line(t: np.ndarray, v: np.ndarray) -> tuple[float, float] | None:

@@ -23,7 +23,8 @@ import math
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -240,11 +241,11 @@ def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
         if ok.sum() >= 3:
             monitor_cycles = infer_cycles(tm[ok], vm[ok], stats=waveform_stats(vm[ok]))
     params = meta.protocol_params
-    drive_p = params.get("drive") if isinstance(params.get("drive"), dict) else {}
-    settle = drive_p.get("settle_s")
+    drive_p = params.get("drive")
+    settle = drive_p.get("settle_s") if isinstance(drive_p, dict) else None
     hold_s = params.get("hold_s")
-    stiff_p = params.get("stiffness") if isinstance(params.get("stiffness"), dict) else {}
-    stiff_hold_s = stiff_p.get("hold_s")
+    stiff_p = params.get("stiffness")
+    stiff_hold_s = stiff_p.get("hold_s") if isinstance(stiff_p, dict) else None
     tf = _stream(reader, Topic.FORCE, "force_N")[0]
     last_force = float(tf[-1]) if tf.size else end_s
 
