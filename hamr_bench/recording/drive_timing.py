@@ -217,8 +217,8 @@ def _bursts(vf: np.ndarray, stats: WaveformStats) -> list[tuple[int, int]]:
     thr = stats.ground_V + max(DETECT_NOISE_SIGMAS * noise, DETECT_FRACTION * stats.range_V)
     runs = _segments(vf > thr)
     # noise on a slow ramp can dip back under the threshold: runs between which the signal never came down to
-    # ground are one burst
-    floor = stats.ground_V + max(3.0 * noise, 1e-9 * stats.range_V)
+    # half the threshold are one burst
+    floor = stats.ground_V + 0.5 * (thr - stats.ground_V)
     merged: list[tuple[int, int]] = []
     for a, b in runs:
         if merged and float(np.min(vf[merged[-1][1]:a])) > floor:
