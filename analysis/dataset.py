@@ -12,6 +12,12 @@ cycles. What "the value" is, per protocol, is documented in `analysis/observatio
   undriven stiffness steps (mode 'stiffness', sag_m = push past contact) the same, with `stiffness.hold_s`;
 - imported point tables: the `measurement` event of each step carries the value itself (one "cycle").
 
+Steps and their cycles come from the recording contract's one step parser (`hamr_bench.recording.steps`, shared
+with the gap diagnosis): a cycle's plateaus are its own corners, from the commanded drive waveform or, where the
+recording has none (an imported trace), inferred from the measured drive monitor. A recording with several
+specimens (an imported file) gives one `Run` per specimen/session block; `RunInfo.session` is the nuisance group
+of `analysis.sessions` (the fit's zero offsets are per session, not per file).
+
 The force the contact search left on the sensor (`preload_N`: mean force over the last 0.1 s before
 `contact_found`) is kept per run, because the observation model needs it (zero sag is where the force dropped
 below the release threshold, not where it is exactly zero).
@@ -19,15 +25,20 @@ below the release threshold, not where it is exactly zero).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from hamr_bench.errors import ConfigError, HamrBenchError, RecordingError
+from analysis.sessions import session_key
+from hamr_bench.errors import ConfigError, HamrBenchError
+from hamr_bench.recording.contract import EventKind, Topic
+from hamr_bench.recording.drive_timing import Cycle, infer_cycles
+from hamr_bench.recording.run_metadata import RunMetadata
+from hamr_bench.recording.steps import StepRecord, open_reader, parse_run, sorted_stream
 
 FORCE_WINDOW_S = 0.1          # the runner's averaging window during the contact search
 DEFAULT_SETTLE_FRACTION = 0.5  # of a plateau, when the recording does not say how long to let it settle
@@ -53,6 +64,11 @@ class RunInfo:
     source: str                  # 'recorded' | 'import-points' | 'import-trace'
     preload_N: float
     preload_sd_N: float = 0.0    # standard error of preload_N (sample scatter in its window / sqrt(n))
+    specimen: str = ""           # specimen label ('' = the recording names none: one specimen)
+    session: str = ""            # nuisance group key (analysis.sessions); '' = the run alone
+    session_rule: str = "recording"   # recording | explicit | default
+    timelines: dict[str, str] = field(default_factory=dict)   # bias/drive/stage -> commanded|inferred|measured|absent
+    span_s: tuple[float, float] | None = None   # this run's part of the file (several specimens in one file)
 
 
 @dataclass(frozen=True)
@@ -75,6 +91,8 @@ class Observation:
     spread: float                # standard deviation over cycles (nan with one cycle)
     n_cycles: int
     preload_N: float
+    specimen: str = ""           # the run's specimen label
+    session: str = ""            # the run's session key (analysis.sessions)
 
 
 @dataclass
@@ -88,11 +106,17 @@ class Run:
         return RecordingReader(self.info.path)
 
     def trace(self, topic: str) -> dict[str, np.ndarray]:
-        """Raw stream of one topic (`{'time_s': ..., field: ...}`); empty dict if the topic is absent."""
+        """Raw stream of one topic (`{'time_s': ..., field: ...}`) within this run's part of the file; empty dict
+        if the topic is absent."""
         reader = self.reader()
         if topic not in reader.topics():
             return {}
-        return reader.scalars(topic)
+        data = reader.scalars(topic)
+        if self.info.span_s is None:
+            return data
+        a, b = self.info.span_s
+        keep = (data["time_s"] >= a) & (data["time_s"] < b)
+        return {k: v[keep] for k, v in data.items()}
 
 
 @dataclass
@@ -107,10 +131,7 @@ class Dataset:
             ok = True
             for k, v in where.items():
                 have = getattr(o, k)
-                if isinstance(v, (tuple, list, set)):
-                    ok = have in v
-                else:
-                    ok = have == v
+                ok = have in v if isinstance(v, (tuple, list, set)) else have == v
                 if not ok:
                     break
             if ok:
@@ -139,86 +160,37 @@ class Dataset:
 
 
 # ----------------------------------------------------------------------------------------------- metadata
-def _json(value: str | None, where: str) -> Any:
-    if not value:
-        return {}
-    try:
-        return json.loads(value)
-    except ValueError:
-        raise RecordingError(f"{where} is not JSON") from None
-
-
 def run_info(path: Path, reader: Any, preload_N: float = 0.0, preload_sd_N: float = 0.0) -> RunInfo:
-    meta = reader.metadata()
-    design_md = meta.get("design", {})
-    protocol_md = meta.get("protocol", {})
-    run_md = meta.get("run", {})
-    protocol = protocol_md.get("name", "")
-    if not protocol:
-        raise RecordingError(f"{path}: metadata 'protocol' has no 'name' (not a hamr-bench run recording?)")
-    fixture = design_md.get("fixture") or ("actuator" if protocol == "actuator" else "leg")
-    design_text = design_md.get("design", "")
-    try:
-        design = int(design_text) if design_text not in ("", "mixed") else None
-        layers = int(design_md.get("layers", "2") or 2)
-    except ValueError:
-        raise RecordingError(f"{path}: metadata design/layers are not integers ({design_text!r}, "
-                             f"{design_md.get('layers')!r})") from None
+    """What a recording's metadata says about the run (the whole file: one block)."""
+    return _info(path, RunMetadata.read(reader.metadata(), str(path)), reader.exit_status, preload_N, preload_sd_N)
+
+
+def _info(path: Path | str, meta: RunMetadata, exit_status: str | None, preload_N: float = 0.0,
+          preload_sd_N: float = 0.0, **extra: Any) -> RunInfo:
     return RunInfo(
-        path=str(path), protocol=protocol, fixture=fixture, design=design, layers=layers,
-        params_set=design_md.get("params_set", "effective") or "effective",
-        model_params=_json(design_md.get("model_params") or design_md.get("params"), f"{path}: design.model_params"),
-        protocol_params=_json(protocol_md.get("params") or protocol_md.get("parameters"), f"{path}: protocol.params"),
-        seed=run_md.get("seed", ""), effects=_json(run_md.get("effects"), f"{path}: run.effects"),
-        exit_status=reader.exit_status, source=run_md.get("source", "recorded") or "recorded",
-        preload_N=float(preload_N), preload_sd_N=float(preload_sd_N))
+        path=str(path), protocol=meta.protocol, fixture=meta.fixture_kind, design=meta.design, layers=meta.layers,
+        params_set=meta.params_set, model_params=meta.model_params, protocol_params=meta.protocol_params,
+        seed=meta.seed, effects=meta.effects, exit_status=exit_status, source=meta.source,
+        preload_N=float(preload_N), preload_sd_N=float(preload_sd_N), **extra)
 
 
 # ----------------------------------------------------------------------------------------------- traces -> cycles
-def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) index runs where mask is true."""
-    if mask.size == 0:
-        return []
-    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    starts = np.flatnonzero(d == 1)
-    stops = np.flatnonzero(d == -1)
-    return list(zip(starts.tolist(), stops.tolist()))
-
-
 def plateau_windows(time_s: np.ndarray, volts: np.ndarray, settle_s: float | None
                     ) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """Per trapezoid cycle, the averaging windows ((low_a, low_b), (high_a, high_b)) from the drive waveform.
-
-    A plateau is a run of samples within 1 % of the peak (high) or of ground (low); a cycle is a low plateau
-    followed by a high one (the drive starts with its low dwell). Each window is the plateau minus its first
+    """Per trapezoid cycle of a drive waveform, the averaging windows ((low_a, low_b), (high_a, high_b)): the
+    cycles found by the recording contract's drive-timing inference (`infer_cycles`), each plateau minus its first
     `settle_s` (or minus half of it when `settle_s` is None or longer than half the plateau)."""
-    if time_s.size < 3:
-        return []
-    peak = float(np.max(volts))
-    if not peak > 0:
-        return []
-    tol = 0.01 * peak
-    high = _segments(volts >= peak - tol)
-    low = _segments(np.abs(volts) <= tol)
+    return [_windows(c, settle_s) for c in infer_cycles(time_s, volts, start_s=float(time_s[0]) if len(time_s)
+                                                         else None) if c.complete]
 
-    def window(seg: tuple[int, int]) -> tuple[float, float]:
-        a, b = float(time_s[seg[0]]), float(time_s[seg[1] - 1])
+
+def _windows(c: Cycle, settle_s: float | None) -> tuple[tuple[float, float], tuple[float, float]]:
+    def window(a: float, b: float) -> tuple[float, float]:
         span = b - a
         s = DEFAULT_SETTLE_FRACTION * span if settle_s is None else min(settle_s, DEFAULT_SETTLE_FRACTION * span)
         return a + s, b
 
-    cycles = []
-    for h in high:
-        before = [seg for seg in low if seg[1] <= h[0]]
-        if not before:
-            continue
-        lo_seg = before[-1]
-        if lo_seg[1] - lo_seg[0] < 2 or h[1] - h[0] < 2:
-            continue
-        if cycles and cycles[-1][0] == window(lo_seg):
-            continue
-        cycles.append((window(lo_seg), window(h)))
-    return cycles
+    return window(c.low_start_s, c.rise_start_s), window(c.high_start_s, c.fall_start_s)
 
 
 def _mean_in(t: np.ndarray, y: np.ndarray, a: float, b: float) -> float:
@@ -228,14 +200,6 @@ def _mean_in(t: np.ndarray, y: np.ndarray, a: float, b: float) -> float:
     return float(np.mean(y[i0:i1]))
 
 
-def _sorted(stream: dict[str, np.ndarray], name: str) -> tuple[np.ndarray, np.ndarray]:
-    if not stream:
-        return np.empty(0), np.empty(0)
-    t = stream["time_s"]
-    order = np.argsort(t, kind="stable")
-    return t[order], stream[name][order]
-
-
 def _stats(values: Sequence[float]) -> tuple[float, float, int]:
     v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
     if v.size == 0:
@@ -243,128 +207,92 @@ def _stats(values: Sequence[float]) -> tuple[float, float, int]:
     return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else math.nan), int(v.size)
 
 
-def _cond_float(cond: dict, key: str, default: float) -> float:
-    v = cond.get(key, default)
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return default
+def _preload(tf: np.ndarray, force: np.ndarray, events: list[Any]) -> tuple[float, float]:
+    """Mean force over the contact search's last averaging window, and its standard error."""
+    contact = [e for e in events if e.kind == EventKind.CONTACT_FOUND]
+    if not contact or not tf.size:
+        return 0.0, 0.0
+    i0 = np.searchsorted(tf, contact[0].time_s - FORCE_WINDOW_S, "left")
+    i1 = np.searchsorted(tf, contact[0].time_s + 1e-9, "right")
+    if i1 <= i0:
+        return 0.0, 0.0
+    window = force[i0:i1]
+    return float(window.mean()), float(window.std(ddof=1) / math.sqrt(window.size)) if window.size > 1 else 0.0
+
+
+def _step_observations(step: StepRecord, base: dict[str, Any], tf: np.ndarray, force: np.ndarray,
+                       tc: np.ndarray, disp: np.ndarray) -> list[Observation]:
+    """What one step measures (module docstring)."""
+    out = []
+    if step.kind == "point":
+        for q, v in step.measured.items():
+            out.append(Observation(quantity=q, value=v, spread=math.nan, n_cycles=1, **base))
+    elif step.kind == "driven":
+        if step.drive is None or not step.drive.cycles:
+            return out
+        cycles = [_windows(c, step.settle_s) for c in step.drive.cycles]
+        if step.tracked and tc.size:
+            strokes = [_mean_in(tc, disp, *hi) - _mean_in(tc, disp, *lo) for lo, hi in cycles]
+            mean, spread, k = _stats(strokes)
+            if k:
+                out.append(Observation(quantity="displacement_m", value=mean, spread=spread, n_cycles=k, **base))
+        if (not step.tracked or step.mode == "blocked") and tf.size:
+            mean, spread, k = _stats([_mean_in(tf, force, *hi) for _lo, hi in cycles])
+            if k:
+                out.append(Observation(quantity="force_N", value=mean, spread=spread, n_cycles=k, **base))
+    elif step.hold_window_s is not None and tf.size:
+        # undriven step (static leg, or the actuator's stiffness sweep): the force over its hold window
+        a, b = step.hold_window_s
+        i0, i1 = np.searchsorted(tf, a, "left"), np.searchsorted(tf, b, "right")
+        if i1 > i0:
+            seg = force[i0:i1]
+            out.append(Observation(quantity="force_N", value=float(seg.mean()),
+                                   spread=float(seg.std(ddof=1)) if seg.size > 1 else math.nan, n_cycles=1,
+                                   **base))
+    # stroke magnitude: the camera's sign convention is a rig setting, not physics
+    return [Observation(**{**o.__dict__, "value": -o.value}) if o.quantity == "displacement_m" and o.value < 0
+            else o for o in out]
 
 
 # ----------------------------------------------------------------------------------------------- one recording
-def load_run(path: Path | str, index: int = 0) -> Run:
-    """Read one recording into a Run with its observations. Raises RecordingError naming the file."""
-    import warnings
-
-    from hamr_bench.recording import RecordingReader, RecordingWarning
-
+def load_runs(path: Path | str, first_index: int = 0) -> list[Run]:
+    """Read one recording into Runs with their observations: one per specimen/session block (a native run: one).
+    Raises RecordingError naming the file."""
     path = Path(path)
-    if not path.exists():
-        raise RecordingError(f"{path}: no such recording")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RecordingWarning)   # a partial file still yields its finished steps
-        reader = RecordingReader(path)
-    topics = reader.topics()
+    reader = open_reader(path)
+    parsed = parse_run(reader)
+    tf, force = sorted_stream(reader, Topic.FORCE, "force_N")
+    tc, disp = sorted_stream(reader, Topic.CAMERA_DISPLACEMENT, "displacement_m")
+    preload, preload_sd = _preload(tf, force, parsed.events)
+    blocks = parsed.blocks()
+    runs = []
+    for b_i, block in enumerate(blocks):
+        several = len(blocks) > 1
+        steps = [s for s in parsed.steps if block.start_s <= s.start_s < block.end_s] if several else parsed.steps
+        searched = any(e.kind == EventKind.CONTACT_FOUND and block.start_s <= e.time_s < block.end_s
+                       for e in parsed.events) if several else \
+            any(e.kind == EventKind.CONTACT_FOUND for e in parsed.events)
+        session, rule = session_key(str(path), parsed.meta, block.specimen, block.session,
+                                    parsed.meta.fixture_kind, searched)
+        info = _info(path, parsed.meta, reader.exit_status, preload, preload_sd, specimen=block.specimen,
+                     session=session, session_rule=rule, timelines=dict(parsed.timelines.sources),
+                     span_s=(block.start_s, block.end_s) if several else None)
+        run = Run(info)
+        index = first_index + b_i
+        for step in steps:
+            fixture = "actuator" if step.protocol == "actuator" else "leg"
+            base = dict(run=index, protocol=step.protocol, fixture=fixture, design=step.design, layers=step.layers,
+                        mode=step.mode, voltage_V=step.voltage_V, sag_m=step.sag_m, repetition=step.repetition,
+                        direction=step.direction, step=step.index, preload_N=preload, specimen=block.specimen,
+                        session=session)
+            run.observations += _step_observations(step, base, tf, force, tc, disp)
+        runs.append(run)
+    return runs
 
-    def stream(topic: str) -> dict[str, np.ndarray]:
-        return reader.scalars(topic) if topic in topics and topics[topic].message_count else {}
 
-    events = sorted(reader.events(), key=lambda e: e.time_s)
-    tf, force = _sorted(stream("/force"), "force_N")
-    tc, disp = _sorted(stream("/camera/displacement"), "displacement_m")
-    wave = stream("/amplifier/drive/command") or stream("/amplifier/drive/monitor")
-    tw, volts = _sorted(wave, "voltage_V")
-
-    preload, preload_sd = 0.0, 0.0
-    contact = [e for e in events if e.kind == "contact_found"]
-    if contact and tf.size:
-        i0 = np.searchsorted(tf, contact[0].time_s - FORCE_WINDOW_S, "left")
-        i1 = np.searchsorted(tf, contact[0].time_s + 1e-9, "right")
-        if i1 > i0:
-            window = force[i0:i1]
-            preload = float(window.mean())
-            preload_sd = float(window.std(ddof=1) / math.sqrt(window.size)) if window.size > 1 else 0.0
-    info = run_info(path, reader, preload, preload_sd)
-    run = Run(info)
-    drive_p = info.protocol_params.get("drive", {}) if isinstance(info.protocol_params, dict) else {}
-    settle_s = drive_p.get("settle_s")
-    hold_s = info.protocol_params.get("hold_s") if isinstance(info.protocol_params, dict) else None
-    stiffness_p = info.protocol_params.get("stiffness", {}) if isinstance(info.protocol_params, dict) else {}
-    stiffness_hold_s = stiffness_p.get("hold_s") if isinstance(stiffness_p, dict) else None
-
-    steps = [i for i, e in enumerate(events) if e.kind == "step"]
-    end_time = events[-1].time_s + 1.0 if events else math.inf
-    for n, i in enumerate(steps):
-        ev = events[i]
-        nxt = events[steps[n + 1]].time_s if n + 1 < len(steps) else end_time
-        inside = events[i + 1: steps[n + 1]] if n + 1 < len(steps) else events[i + 1:]
-        cond = dict(ev.data)
-        protocol = str(cond.get("protocol", info.protocol))
-        fixture = "actuator" if protocol == "actuator" else "leg"
-        design = cond.get("design", info.design)
-        design = int(design) if design not in (None, "") else None
-        layers = int(cond.get("layers", info.layers))
-        mode = str(cond.get("mode", ""))
-        base = dict(run=index, protocol=protocol, fixture=fixture, design=design, layers=layers, mode=mode,
-                    voltage_V=_cond_float(cond, "voltage_V", 0.0), sag_m=_cond_float(cond, "sag_m", 0.0),
-                    repetition=int(_cond_float(cond, "repetition", 0)), direction=str(cond.get("direction", "up")),
-                    step=int(ev.step), preload_N=preload)
-        measured = [e for e in inside if e.kind == "measurement"]
-        if measured:
-            for q in ("force_N", "displacement_m"):
-                v = measured[0].data.get(q)
-                if v is not None and np.isfinite(float(v)):
-                    run.observations.append(Observation(quantity=q, value=float(v), spread=math.nan, n_cycles=1,
-                                                        **base))
-            continue
-        starts = [e for e in inside if e.kind == "drive_start"]
-        ends = [e for e in inside if e.kind == "drive_end"]
-        if starts:
-            t_end = ends[0].time_s + 1e-6 if ends else nxt
-            n_samples = int(starts[0].data.get("n_samples", 0) or 0)
-            j0, j1 = np.searchsorted(tw, ev.time_s, "left"), np.searchsorted(tw, t_end, "right")
-            seg_t, seg_v = tw[j0:j1], volts[j0:j1]
-            if n_samples and seg_t.size > n_samples:   # keep the waveform itself, not the set_voltages sample
-                seg_t, seg_v = seg_t[-n_samples:], seg_v[-n_samples:]
-            cycles = plateau_windows(seg_t, seg_v, None if settle_s is None else float(settle_s))
-            if not cycles:
-                continue
-            tracked = bool(starts[0].data.get("track", False)) or protocol == "free-displacement" or mode == "free"
-            if tracked and tc.size:
-                strokes = [_mean_in(tc, disp, *hi) - _mean_in(tc, disp, *lo) for lo, hi in cycles]
-                mean, spread, k = _stats(strokes)
-                if k:
-                    run.observations.append(Observation(quantity="displacement_m", value=mean, spread=spread,
-                                                        n_cycles=k, **base))
-            if not tracked or mode == "blocked":
-                if tf.size:
-                    mean, spread, k = _stats([_mean_in(tf, force, *hi) for _lo, hi in cycles])
-                    if k:
-                        run.observations.append(Observation(quantity="force_N", value=mean, spread=spread,
-                                                            n_cycles=k, **base))
-        elif tf.size:
-            # Undriven step (static leg, or the actuator's stiffness sweep): the force over the hold that follows
-            # the step event.
-            h = stiffness_hold_s if mode == "stiffness" else hold_s
-            if h is not None:
-                a, b = ev.time_s, min(ev.time_s + float(h), nxt)
-            else:   # no hold time recorded (imported trace): the second half of the plateau, after settling
-                end = min(nxt, float(tf[-1]))
-                a, b = ev.time_s + DEFAULT_SETTLE_FRACTION * (end - ev.time_s), end
-            i0, i1 = np.searchsorted(tf, a, "left"), np.searchsorted(tf, b, "right")
-            if i1 > i0:
-                seg = force[i0:i1]
-                run.observations.append(Observation(
-                    quantity="force_N", value=float(seg.mean()),
-                    spread=float(seg.std(ddof=1)) if seg.size > 1 else math.nan, n_cycles=1, **base))
-    # Stroke magnitude: the camera's sign convention is a rig setting, not physics.
-    flipped = []
-    for o in run.observations:
-        if o.quantity == "displacement_m" and o.value < 0:
-            o = Observation(**{**o.__dict__, "value": -o.value})
-        flipped.append(o)
-    run.observations = flipped
-    return run
+def load_run(path: Path | str, index: int = 0) -> Run:
+    """The first (for a native run: the only) Run of a recording; `load_runs` gives every specimen's."""
+    return load_runs(path, index)[0]
 
 
 def load_dataset(paths: Iterable[Path | str], skip_failed: bool = False) -> Dataset:
@@ -381,11 +309,10 @@ def load_dataset(paths: Iterable[Path | str], skip_failed: bool = False) -> Data
     runs: list[Run] = []
     for f in files:
         try:
-            run = load_run(f, len(runs))
+            runs.extend(load_runs(f, len(runs)))
         except HamrBenchError:
             if skip_failed:
                 continue
             raise
-        runs.append(run)
     obs = [o for r in runs for o in r.observations]
     return Dataset(runs, obs)

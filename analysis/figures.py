@@ -42,13 +42,22 @@ def _plt():
     return plt
 
 
-def _points(obs: list[Observation], x: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    groups: dict[float, list[float]] = {}
-    for o in obs:
-        groups.setdefault(round(getattr(o, x), 9), []).append(o.value)
-    xs = np.array(sorted(groups))
-    mean = np.array([np.mean(groups[k]) for k in xs])
-    sd = np.array([np.std(groups[k], ddof=1) if len(groups[k]) > 1 else 0.0 for k in xs])
+def _points(obs: list[Observation], x: str, minus: dict[int, float] | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per condition, the mean x and the mean and SD of the values (over repetitions and specimens). A condition
+    is a cluster of x values: voltages within 1 % of the cluster's first (a measured V_bias of 199.98 V and one of
+    200.01 V are one condition), sags within 1 nm. `minus`: a value to subtract per run (its session's offset)."""
+    tol_rel, tol_abs = (0.01, 1e-9) if x == "voltage_V" else (0.0, 1e-9)
+    points = sorted((float(getattr(o, x)), o.value - (minus or {}).get(o.run, 0.0)) for o in obs)
+    groups: list[list[tuple[float, float]]] = []
+    for p in points:
+        if groups and p[0] - groups[-1][0][0] <= tol_rel * abs(groups[-1][0][0]) + tol_abs:
+            groups[-1].append(p)
+        else:
+            groups.append([p])
+    xs = np.array([np.mean([p[0] for p in g]) for g in groups])
+    mean = np.array([np.mean([p[1] for p in g]) for g in groups])
+    sd = np.array([np.std([p[1] for p in g], ddof=1) if len(g) > 1 else 0.0 for g in groups])
     return xs, mean, sd
 
 
@@ -69,14 +78,23 @@ def _predict_leg(a, d, protocol: str, volts: np.ndarray, sags: np.ndarray, offse
     return LegObservations([protocol] * volts.size, volts, sags).predict(Powertrain(a, d), offset_m)
 
 
-def run_offset(dataset: Dataset, fit: FitReport, group: str, key: int, obs: list[Observation]) -> float:
-    """The fitted zero offset of the run these observations come from (0 if not fitted; mean over runs)."""
+def run_offsets(dataset: Dataset, fit: FitReport, group: str, key: int, obs: list[Observation]) -> dict[int, float]:
+    """Per run of these observations, its session's fitted zero offset (0 where none was fitted)."""
     groups = fit.designs if group == "design" else fit.actuators
     g = groups.get(key) if fit else None
-    if g is None:
-        return 0.0
-    runs = g.derived.get("zero_offsets", {}).get("runs", {})
-    values = [runs[dataset.runs[r].info.path] for r in {o.run for o in obs} if dataset.runs[r].info.path in runs]
+    out = {}
+    offsets = g.derived.get("zero_offsets", {}) if g is not None else {}
+    sessions, runs = offsets.get("sessions", {}), offsets.get("runs", {})
+    for r in {o.run for o in obs}:
+        info = dataset.runs[r].info
+        key_s = info.session or f"run {r}"
+        out[r] = float(sessions[key_s]) if key_s in sessions else float(runs.get(info.path, 0.0))
+    return out
+
+
+def run_offset(dataset: Dataset, fit: FitReport, group: str, key: int, obs: list[Observation]) -> float:
+    """The fitted zero offset of the session(s) these observations come from (0 if not fitted; mean over them)."""
+    values = list(run_offsets(dataset, fit, group, key, obs).values())
     return float(np.mean(values)) if values else 0.0
 
 
@@ -117,21 +135,23 @@ def fig7_actuator(dataset: Dataset, fit: FitReport, path: Path) -> Path | None:
         blocked = [o for o in mine if o.mode == "blocked"]
         free = [o for o in mine if o.mode == "free"]
         label = f"{layers}x CF"
-        pre = run_offset(dataset, fit, "actuator", layers, blocked) if blocked else 0.0
+        pre = run_offsets(dataset, fit, "actuator", layers, blocked + [o for o in mine if o.mode == "stiffness"])
         if blocked:
-            x, m, sd = _points(blocked, "voltage_V")
-            ax_f.errorbar(x, (m - pre) * 1e3, sd * 1e3, fmt="o", color=color, capsize=3, label=f"{label} data")
+            x, m, sd = _points(blocked, "voltage_V", pre)
+            ax_f.errorbar(x, m * 1e3, sd * 1e3, fmt="o", color=color, capsize=3, label=f"{label} data")
         ax_f.plot(vv, act.blocked_force_N(a, vv) * 1e3, style, color=color, label=f"{label} model")
         if free:
             x, m, sd = _points(free, "voltage_V")
             ax_d.errorbar(x, m / 2 * 1e6, sd / 2 * 1e6, fmt="o", color=color, capsize=3, label=f"{label} data")
         ax_d.plot(vv, act.free_displacement_m(a, vv) * 1e6, style, color=color, label=f"{label} model")
         if blocked and free:
-            xb, mb, _ = _points(blocked, "voltage_V")
+            xb, mb, _ = _points(blocked, "voltage_V", pre)
             xf, mf, _ = _points(free, "voltage_V")
-            common = np.intersect1d(xb, xf)
-            fb = np.array([mb[xb == v][0] for v in common]) - pre
-            df = np.array([mf[xf == v][0] for v in common]) / 2
+            pairs = [(i, int(np.argmin(np.abs(xf - v)))) for i, v in enumerate(xb)
+                     if np.min(np.abs(xf - v)) <= 0.01 * abs(v)]
+            common = np.array([xb[i] for i, _ in pairs])
+            fb = np.array([mb[i] for i, _ in pairs])
+            df = np.array([mf[j] for _, j in pairs]) / 2
             ax_e.plot(common, fb * df * 1e6, "o", color=color, label=f"{label} data")
             ax_ed.plot(common, fb * df / act.mass_kg(a), "o", color=color, label=f"{label} data")
         stiff = [o for o in mine if o.mode == "stiffness"]
@@ -140,8 +160,8 @@ def fig7_actuator(dataset: Dataset, fit: FitReport, path: Path) -> Path | None:
             for direction, face in (("up", color), ("down", "none")):
                 rows = [o for o in stiff if o.direction == direction]
                 if rows:
-                    x, m, _ = _points(rows, "sag_m")
-                    ax_k.plot(x * 1e6, (m - pre) * 1e3, "o", color=color, markerfacecolor=face,
+                    x, m, _ = _points(rows, "sag_m", pre)
+                    ax_k.plot(x * 1e6, m * 1e3, "o", color=color, markerfacecolor=face,
                               label=f"{label} {'loading' if direction == 'up' else 'unloading'}")
             pp = np.linspace(0, max(o.sag_m for o in stiff), 20)
             ax_k.plot(pp * 1e6, act.stiffness_N_per_m(a) * pp * 1e3, style, color=color,
@@ -158,7 +178,8 @@ def fig7_actuator(dataset: Dataset, fit: FitReport, path: Path) -> Path | None:
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.suptitle("Fig. 7: actuator characterisation (points: data, mean +- sd over repetitions; lines: fitted model)",
+    fig.suptitle("Fig. 7: actuator characterisation (points: data, mean +- sd over repetitions and specimens; lines: "
+                 "fitted model)",
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

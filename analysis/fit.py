@@ -23,7 +23,8 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -87,6 +88,8 @@ class GroupFit:
     warnings: list[str] = field(default_factory=list)
     derived: dict[str, dict[str, Any]] = field(default_factory=dict)
     model: Any = None             # ActuatorParams or (ActuatorParams, DesignParams)
+    specimens: dict[str, GroupFit] = field(default_factory=dict)   # per-specimen fits (two or more specimens)
+    sessions: dict[str, list[str]] = field(default_factory=dict)   # session key -> its recordings
 
     def as_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {name: p.as_json() for name, p in self.params.items()}
@@ -94,6 +97,10 @@ class GroupFit:
                    reduced_chi2=_num(self.chi2 / self.dof) if self.dof > 0 else None, warnings=self.warnings)
         if self.derived:
             out["derived"] = self.derived
+        if self.sessions:
+            out["sessions"] = self.sessions
+        if self.specimens:
+            out["specimens"] = {k: v.as_json() for k, v in self.specimens.items()}
         return out
 
 
@@ -122,9 +129,14 @@ def _num(x: float | None) -> float | None:
 
 
 # ----------------------------------------------------------------------------------------------- weights
+def setup_of(o: Observation) -> str:
+    """The setup an observation was measured in: its session (analysis.sessions), or its run when it has none."""
+    return o.session or f"run {o.run}"
+
+
 def group_sigmas(obs: list[Observation]) -> np.ndarray:
-    """Per observation, the sigma of its (run, quantity) group (see module docstring)."""
-    keys = [(o.run, o.quantity) for o in obs]
+    """Per observation, the sigma of its (session, quantity) group (see module docstring)."""
+    keys = [(setup_of(o), o.quantity) for o in obs]
     sig = np.empty(len(obs))
     for key in set(keys):
         idx = [i for i, k in enumerate(keys) if k == key]
@@ -151,10 +163,12 @@ def group_sigmas(obs: list[Observation]) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Nuisance:
-    """Per-run zero offsets (analysis/observations.py): one parameter per run with a contact search, with a
-    Gaussian prior of width `sigma` around 0 (the search's resolution), entered as one extra residual each."""
+    """Per-session zero offsets (analysis/observations.py): one parameter per setup (a native run with its contact
+    search, or the files of one specimen and session), with a Gaussian prior of width `sigma` around 0 (the
+    search's resolution), entered as one extra residual each. Per session, not per file: a session split into one
+    file per voltage must not get one offset per voltage, which would absorb a voltage-dependent effect."""
 
-    runs: tuple[int, ...]
+    runs: tuple[str, ...]            # the session keys (`setup_of`)
     row_index: np.ndarray            # per observation row: index into runs, or -1 (no offset)
     specs: tuple[ParamSpec, ...]
     sigma: float
@@ -168,11 +182,11 @@ class Nuisance:
 
 
 def make_nuisance(obs: list[Observation], applies, name: str, unit: str, sigma: float, bound: float) -> Nuisance:
-    runs = tuple(sorted({o.run for o in obs if applies(o)}))
-    pos = {r: i for i, r in enumerate(runs)}
-    rows = np.array([pos[o.run] if applies(o) else -1 for o in obs], dtype=int)
-    specs = tuple(ParamSpec(f"{name}[run {r}]", unit, -bound, bound, log=False, typical=sigma) for r in runs)
-    return Nuisance(runs, rows, specs, sigma)
+    setups = tuple(dict.fromkeys(setup_of(o) for o in obs if applies(o)))
+    pos = {r: i for i, r in enumerate(setups)}
+    rows = np.array([pos[setup_of(o)] if applies(o) else -1 for o in obs], dtype=int)
+    specs = tuple(ParamSpec(f"{name}[{r}]", unit, -bound, bound, log=False, typical=sigma) for r in setups)
+    return Nuisance(setups, rows, specs, sigma)
 
 
 def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, reference: np.ndarray, nuisance: Nuisance,
@@ -210,7 +224,7 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
     if pred is not None and np.all(np.isfinite(pred)):
         res = pred - y
         n, p = y.size, len(all_specs)
-        keys = [(o.run, o.quantity) for o in obs]
+        keys = [(setup_of(o), o.quantity) for o in obs]
         for key in set(keys):
             idx = np.array([i for i, k in enumerate(keys) if k == key])
             df_rep = _replicate_dof([obs[i] for i in idx])
@@ -219,7 +233,7 @@ def fit_weighted(obs: list[Observation], y: np.ndarray, predict, specs, referenc
             sig[idx] = max(math.sqrt(var), 1e-3 * float(sig[idx][0]))
     z1 = np.array([sp.to_z(v, r) for sp, v, r in zip(all_specs, out1.values, all_ref)])
     # each group's sigma was estimated from these residuals: one degree of freedom each
-    n_groups = len({(o.run, o.quantity) for o in obs})
+    n_groups = len({(setup_of(o), o.quantity) for o in obs})
     J0 = None
     if out1.jacobian is not None:
         J0 = out1.jacobian.copy()
@@ -260,8 +274,10 @@ ACTUATOR_OFFSET_SIGMA_N = 5e-3     # the actuator protocol's contact threshold: 
 
 
 def fit_actuator(dataset: Dataset, layers: int, method: str = "least-squares", intervals: bool = True,
-                 level: float = 0.95) -> GroupFit:
-    obs = [o for o in dataset.observations if o.fixture == "actuator" and o.layers == layers]
+                 level: float = 0.95, specimen: str | None = None) -> GroupFit:
+    """Fit one layer count's actuator (one specimen's rows when `specimen` is given)."""
+    obs = [o for o in dataset.observations if o.fixture == "actuator" and o.layers == layers
+           and (specimen is None or o.specimen == specimen)]
     if not obs:
         raise ConfigError(f"no actuator observations with {layers} layers in the given recordings")
     base = _actuator_base(dataset, obs, layers)
@@ -292,12 +308,20 @@ def fit_actuator(dataset: Dataset, layers: int, method: str = "least-squares", i
     g.model = fitted
     g.derived = _actuator_derived(obs, sig, fitted, level)
     g.derived["zero_offsets"] = _offsets_json(dataset, nuisance, out.values[n:], "N")
+    g.sessions = _sessions(dataset, obs)
     return g
 
 
 def _offsets_json(dataset: Dataset, nuisance: Nuisance, values: np.ndarray, unit: str) -> dict[str, Any]:
-    return {"unit": unit, "note": "per-run zero offset at nominal zero sag / tip zero (nuisance parameter)",
-            "runs": {dataset.runs[r].info.path: float(v) for r, v in zip(nuisance.runs, values)}}
+    """Zero offsets per session, and per recording (the mean of its sessions': one per native run)."""
+    by_setup = {k: float(v) for k, v in zip(nuisance.runs, values, strict=True)}
+    runs: dict[str, list[float]] = {}
+    for run_index, run in enumerate(dataset.runs):
+        key = run.info.session or f"run {run_index}"
+        if key in by_setup:
+            runs.setdefault(run.info.path, []).append(by_setup[key])
+    return {"unit": unit, "note": "zero offset at nominal zero sag / tip zero per session (nuisance parameter)",
+            "sessions": by_setup, "runs": {p: float(np.mean(v)) for p, v in runs.items()}}
 
 
 def _slope_ci(x: np.ndarray, y: np.ndarray, sig: np.ndarray, groups: np.ndarray | None) -> tuple[float, float, int]:
@@ -330,7 +354,7 @@ def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams
 
     v = np.array([o.voltage_V for o in obs])
     y = np.array([o.value for o in obs])
-    runs = np.array([o.run for o in obs])
+    runs = np.array([setup_of(o) for o in obs])   # one force offset per session: the intercept groups
     mode = np.array([o.mode for o in obs])
     blocked, free, stiff = mode == "blocked", mode == "free", mode == "stiffness"
     push = np.array([o.sag_m for o in obs])
@@ -350,6 +374,9 @@ def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams
             out["stiffness_direct"] = {"value": k, "ci95": [k - t * sk, k + t * sk], "unit": "N/m",
                                        "note": "slope of the undriven stiffness sweep (force on push past contact)"}
     v_max = float(v.max())
+    # the name carries the voltage to 3 digits: a measured V_bias (an imported trace's 200.006 V) names the same
+    # quantity as the nominal 200 V
+    at = f"{v_max:.3g}V"
 
     def entry(value: float, rel_sd: float, dof: int, unit: str) -> dict[str, Any]:
         t = stats.t.ppf(0.5 + 0.5 * level, max(dof, 1))
@@ -358,18 +385,18 @@ def _actuator_derived(obs: list[Observation], sig: np.ndarray, a: ActuatorParams
     if "force_per_volt" in est:
         c, sc, dc = est["force_per_volt"]
         out["force_per_volt"] = entry(c, sc / c, dc, "N/V")
-        out[f"blocked_force_at_{v_max:g}V"] = entry(c * v_max, sc / c, dc, "N")
+        out[f"blocked_force_at_{at}"] = entry(c * v_max, sc / c, dc, "N")
     if "displacement_per_volt" in est:
         s, ss, ds = est["displacement_per_volt"]
         out["displacement_per_volt"] = entry(s, ss / s, ds, "m/V")
-        out[f"free_displacement_at_{v_max:g}V"] = entry(s * v_max, ss / s, ds, "m")
+        out[f"free_displacement_at_{at}"] = entry(s * v_max, ss / s, ds, "m")
     if len(est) == 2:
         rel = math.hypot(sc / c, ss / s)
         dof = min(dc, ds)
         out["stiffness"] = entry(c / s, rel, dof, "N/m")
         m = act.mass_kg(a)
-        out[f"energy_at_{v_max:g}V"] = entry(c * s * v_max**2, rel, dof, "J")
-        out[f"energy_density_at_{v_max:g}V"] = {**entry(c * s * v_max**2 / m, rel, dof, "J/kg"),
+        out[f"energy_at_{at}"] = entry(c * s * v_max**2, rel, dof, "J")
+        out[f"energy_density_at_{at}"] = {**entry(c * s * v_max**2 / m, rel, dof, "J/kg"),
                                                 "note": f"mass {m * 1e6:.2f} mg from the fitted geometry "
                                                         "(not measured)"}
     return out
@@ -411,9 +438,12 @@ def zero_sag_sigma_m(dataset: Dataset, obs: list[Observation], a: ActuatorParams
 
 def fit_transmission(dataset: Dataset, design: int, method: str = "least-squares", intervals: bool = True,
                      protocols: Iterable[str] = LEG_FIT_PROTOCOLS,
-                     fitted_actuators: dict[int, GroupFit] | None = None, level: float = 0.95) -> GroupFit:
+                     fitted_actuators: dict[int, GroupFit] | None = None, level: float = 0.95,
+                     specimen: str | None = None) -> GroupFit:
+    """Fit one design's transmission (one specimen's rows when `specimen` is given)."""
     protocols = tuple(protocols)
-    obs = [o for o in dataset.observations if o.fixture == "leg" and o.design == design and o.protocol in protocols]
+    obs = [o for o in dataset.observations if o.fixture == "leg" and o.design == design and o.protocol in protocols
+           and (specimen is None or o.specimen == specimen)]
     if not obs:
         raise ConfigError(f"no leg observations of design {design} ({', '.join(protocols)}) in the given recordings")
     layer_counts = sorted({o.layers for o in obs})
@@ -440,6 +470,7 @@ def fit_transmission(dataset: Dataset, design: int, method: str = "least-squares
                  "protocols": sorted({o.protocol for o in obs}),
                  "zero_offsets": {**_offsets_json(dataset, nuisance, out.values[n:], "m"),
                                   "prior_sigma": sigma_h}}
+    g.sessions = _sessions(dataset, obs)
     return g
 
 
@@ -526,22 +557,129 @@ def _group(key: str, specs, reference, out: FitOutcome, obs, y, pred, method) ->
     return GroupFit(key, params, rms_N, rms_m, len(obs), out.chi2, out.dof, method, warnings)
 
 
+def _sessions(dataset: Dataset, obs: list[Observation]) -> dict[str, list[str]]:
+    """Session key -> the recordings (file, and specimen where the file has several) it groups."""
+    out: dict[str, list[str]] = {}
+    for r in sorted({o.run for o in obs}):
+        info = dataset.runs[r].info
+        name = info.path + (f" (specimen {info.specimen})" if info.span_s is not None else "")
+        out.setdefault(info.session or f"run {r}", []).append(name)
+    return out
+
+
+def specimens_of(obs: Iterable[Observation]) -> list[str]:
+    """The specimen labels among observations, in order of appearance."""
+    return list(dict.fromkeys(o.specimen for o in obs))
+
+
+def combine_specimens(key: str, fits: dict[str, GroupFit], level: float = 0.95) -> GroupFit:
+    """Per-specimen fits of one group -> the population (analysis/specimens.py): each parameter and derived
+    quantity as the mean over specimens with the interval of that mean and the between-specimen spread. The fit
+    statistics are the specimens' own (within-specimen residuals): scatter between specimens is not lack of fit."""
+    from analysis.specimens import population, standard_error
+
+    first = next(iter(fits.values()))
+    labels = list(fits)
+    params = {}
+    for name, p0 in first.params.items():
+        estimates = [f.params[name] for f in fits.values()]
+        statuses = {e.status for e in estimates}
+        identified = statuses <= {"identified"}
+        pop = population([e.value for e in estimates], level=level)
+        value = pop["value"] if pop else p0.value
+        if identified and pop:
+            ci: tuple[float, float] | None = (pop["ci95"][0], pop["ci95"][1])
+            status = "identified"
+        else:
+            known = [e.ci95 for e in estimates if e.ci95 is not None]
+            ci = (min(c[0] for c in known), max(c[1] for c in known)) if known else None
+            status = next(st for st in ("not identifiable", "weakly identified", "upper limit", "not computed",
+                                        "identified") if st in statuses)
+        params[name] = ParamEstimate(name, value, ci, p0.unit, status, p0.reference)
+    derived: dict[str, dict[str, Any]] = {}
+    for name, d0 in first.derived.items():
+        entries = [f.derived.get(name) for f in fits.values()]
+        if not all(isinstance(e, dict) and "value" in e and "ci95" in e for e in entries):
+            continue
+        pop = population([float(e["value"]) for e in entries], [standard_error(e, level) for e in entries], level)
+        if pop:
+            derived[name] = {**pop, "unit": d0.get("unit", ""),
+                             "note": f"population of {len(entries)} specimens ({', '.join(labels)}): mean, 95 % "
+                                     "interval of the mean (t), between-specimen SD, tau = SD beyond each "
+                                     "specimen's own error"}
+    derived["zero_offsets"] = {"unit": first.derived.get("zero_offsets", {}).get("unit", ""),
+                               "sessions": {k: v for f in fits.values()
+                                            for k, v in f.derived.get("zero_offsets", {}).get("sessions", {}).items()},
+                               "runs": {k: v for f in fits.values()
+                                        for k, v in f.derived.get("zero_offsets", {}).get("runs", {}).items()}}
+    rms = {}
+    for unit in ("rms_N", "rms_m"):
+        parts = [(getattr(f, unit), f.n_observations) for f in fits.values() if getattr(f, unit) is not None]
+        rms[unit] = math.sqrt(sum(r * r * n for r, n in parts) / sum(n for _r, n in parts)) if parts else None
+    warnings = [f"specimen-to-specimen scatter modelled by per-specimen fits ({len(fits)} specimens: "
+                f"{', '.join(labels)}): values are population means, intervals the 95 % interval of the mean; "
+                "each derived quantity gives the between-specimen SD (not lack of fit)"]
+    by_text: dict[str, list[str]] = {}
+    for k, f in fits.items():
+        for w in f.warnings:
+            by_text.setdefault(w, []).append(k)
+    warnings += [f"specimen{'s' if len(ks) > 1 else ''} {', '.join(ks)}: {w}" for w, ks in by_text.items()]
+    g = GroupFit(key, params, rms["rms_N"], rms["rms_m"], sum(f.n_observations for f in fits.values()),
+                 sum(f.chi2 for f in fits.values()), sum(f.dof for f in fits.values()), first.method, warnings,
+                 derived)
+    g.specimens = dict(fits)
+    g.sessions = {k: v for f in fits.values() for k, v in f.sessions.items()}
+    g.model = _mean_model(first.model, [f.model for f in fits.values()])
+    return g
+
+
+def _mean_model(first: Any, models: list[Any]) -> Any:
+    """The population model: the fitted fields averaged over specimens."""
+    if isinstance(first, ActuatorParams):
+        return replace(first, **{f: float(np.mean([getattr(m, f) for m in models])) for f in ACTUATOR_FIELDS.values()})
+    if isinstance(first, tuple):
+        a = _mean_model(first[0], [m[0] for m in models])
+        d = first[1]
+        d = replace(d, k_ser_N_per_m=float(np.mean([m[1].k_ser_N_per_m for m in models])),
+                    bias_m=float(np.mean([m[1].bias_m for m in models])),
+                    kappa_N_m_per_rad=tuple(float(x) for x in np.mean([m[1].kappa_N_m_per_rad for m in models],
+                                                                      axis=0)))
+        return (a, d)
+    return first
+
+
 def _fit_actuator_task(args: tuple) -> GroupFit:
-    dataset, layers, method, intervals, level = args
-    return fit_actuator(dataset, layers, method, intervals, level)
+    dataset, layers, method, intervals, level, specimen = args
+    return fit_actuator(dataset, layers, method, intervals, level, specimen=specimen)
 
 
 def _fit_transmission_task(args: tuple) -> GroupFit:
-    dataset, design, method, intervals, actuators, level = args
-    return fit_transmission(dataset, design, method, intervals, fitted_actuators=actuators, level=level)
+    dataset, design, method, intervals, actuators, level, specimen = args
+    return fit_transmission(dataset, design, method, intervals, fitted_actuators=actuators, level=level,
+                            specimen=specimen)
+
+
+def _by_specimen(tasks: list[tuple[Any, list[str]]], results: list[GroupFit], key_of, level: float
+                 ) -> dict[Any, GroupFit]:
+    """Group results of (group, specimens) tasks: one specimen -> its fit; several -> their population."""
+    out = {}
+    it = iter(results)
+    for group, labels in tasks:
+        fits = {label: next(it) for label in labels}
+        if len(labels) == 1:
+            out[group] = fits[labels[0]]
+        else:
+            out[group] = combine_specimens(key_of(group), fits, level)
+    return out
 
 
 def fit_dataset(dataset: Dataset, method: str = "least-squares", intervals: bool = True,
                 actuator_source: str = "recording", designs: Iterable[int] | None = None,
                 level: float = 0.95, jobs: int | None = 1, scheduler: Any = None) -> FitReport:
     """Fit every actuator layer count and every design present in the dataset (intervals at confidence `level`;
-    the JSON keeps the name ci95, so callers that change it must say so). The groups are independent fits:
-    `jobs` spreads them over local processes (None: one per core), `scheduler` over a Dask cluster."""
+    the JSON keeps the name ci95, so callers that change it must say so). A group with several specimens is fitted
+    per specimen and reported as their population (`combine_specimens`). The fits are independent: `jobs` spreads
+    them over local processes (None: one per core), `scheduler` over a Dask cluster."""
     from analysis.parallel import parallel_map
 
     if not 0.5 < level < 1.0:
@@ -549,19 +687,22 @@ def fit_dataset(dataset: Dataset, method: str = "least-squares", intervals: bool
     if method not in METHODS:
         raise ConfigError(f"--method {method!r}: expected one of {', '.join(METHODS)}")
     report = FitReport(method, {}, {})
-    layer_counts = sorted({o.layers for o in dataset.observations if o.fixture == "actuator"})
-    fitted = parallel_map(_fit_actuator_task, [(dataset, n, method, intervals, level) for n in layer_counts],
-                          jobs=jobs, scheduler=scheduler)
-    report.actuators.update(zip(layer_counts, fitted))
+    act_tasks = [(n, specimens_of(o for o in dataset.observations if o.fixture == "actuator" and o.layers == n))
+                 for n in sorted({o.layers for o in dataset.observations if o.fixture == "actuator"})]
+    fitted = parallel_map(_fit_actuator_task, [(dataset, n, method, intervals, level, sp if len(sps) > 1 else None)
+                                               for n, sps in act_tasks for sp in sps], jobs=jobs, scheduler=scheduler)
+    report.actuators.update(_by_specimen(act_tasks, fitted, str, level))
     wanted = sorted({o.design for o in dataset.observations
                      if o.fixture == "leg" and o.design is not None and o.protocol in LEG_FIT_PROTOCOLS})
     if designs is not None:
         wanted = [d for d in wanted if d in set(designs)]
     actuators = report.actuators if actuator_source == "fit" else None
+    leg_tasks = [(d, specimens_of(o for o in dataset.observations if o.fixture == "leg" and o.design == d
+                                  and o.protocol in LEG_FIT_PROTOCOLS)) for d in wanted]
     fitted = parallel_map(_fit_transmission_task,
-                          [(dataset, d, method, intervals, actuators, level) for d in wanted],
-                          jobs=jobs, scheduler=scheduler)
-    report.designs.update(zip(wanted, fitted))
+                          [(dataset, d, method, intervals, actuators, level, sp if len(sps) > 1 else None)
+                           for d, sps in leg_tasks for sp in sps], jobs=jobs, scheduler=scheduler)
+    report.designs.update(_by_specimen(leg_tasks, fitted, str, level))
     if not report.actuators and not report.designs:
         report.warnings.append("no fittable observations (actuator or blocked-force/sag-sweep/free-displacement)")
     return report

@@ -30,15 +30,17 @@ import hashlib
 import json
 import math
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hamr_bench.errors import ConfigError, RecordingError
-from hamr_bench.protocols.plan import Home, SetVoltages, Step, Tare
+from hamr_bench.protocols.plan import FindContact, Home, SetVoltages, Step, Tare
 from hamr_bench.protocols.replay_plan import Note, ReplayDrive, StageCommand, WaitUntil
+from hamr_bench.protocols.runner import FORCE_WINDOW_S
+from hamr_bench.recording.contract import EventKind, Topic
 
 STAGE_TOLERANCE_M = 1e-6
 TARE_LEAD_S = 3.0       # longer than a tare takes (leg rig ~0.4 s: stream stop + drain + restart; Nano17 ~1 s)
@@ -46,8 +48,10 @@ DRIVE_LEAD_S = 0.01     # longer than an amplifier takes to arm a waveform after
 STEP_LEAD_S = 0.05      # longer than the stage check the runner makes before it records a step (~10 ms)
 MAX_RESAMPLED_RATE_HZ = 1000.0  # an imported trace's drive is resampled to at most this rate
 DRIVE_REST_V = 0.5      # an imported drive below this is at rest (a monitor's noise is ~0.1 V)
-MONITOR_TOPICS = ("/amplifier/bias/monitor", "/amplifier/drive/monitor")
-CAMERA_TOPICS = ("/camera/displacement", "/camera/image")
+CONTACT_STEP_S = 0.1    # more than a stage step takes on the rigs (allowance for an imported trace's search)
+HOME_ALLOWANCE_S = 10.0  # more than homing takes from the actuator's contact (a few mm at the stage's speed)
+MONITOR_TOPICS = (Topic.BIAS_MONITOR, Topic.DRIVE_MONITOR)
+CAMERA_TOPICS = (Topic.CAMERA_DISPLACEMENT, Topic.CAMERA_IMAGE)
 
 
 @dataclass
@@ -127,7 +131,7 @@ def read_replay_source(path: Path | str) -> ReplaySource:
     all_ends = [t.last_time_s for t in topics.values() if t.last_time_s is not None]
     start_s = min(all_times + [e.time_s for e in events]) if (all_times or events) else 0.0
     end_s = max(all_ends + [e.time_s for e in events]) if (all_ends or events) else 0.0
-    run_end = [e for e in events if e.kind == "run_end"]
+    run_end = [e for e in events if e.kind == EventKind.RUN_END]
     exit_status = reader.exit_status or (run_end[-1].data.get("exit_status") if run_end else None) or "unknown"
     source = ReplaySource(
         path=path, kind=rig_md.get("kind", "real") or "real", protocol=proto["name"],
@@ -136,12 +140,42 @@ def read_replay_source(path: Path | str) -> ReplaySource:
         seed=_int_or_none(run_md.get("seed")), effects=effects, exit_status=exit_status,
         exit_reason=reader.exit_reason or (run_end[-1].message if run_end else "") or "",
         start_s=start_s, end_s=end_s)
-    source.items = _build_items(reader, events)
-    source.steps = sum(1 for e in events if e.kind == "step")
+    source.items = _build_items(reader, events, source.fixture)
+    source.steps = sum(1 for e in events if e.kind == EventKind.STEP)
     return source
 
 
-def _build_items(reader: Any, events: list[Any]) -> list[Any]:
+def _contact_moves(reader: Any, events: list[Any], fixture: str) -> list[tuple[float, Any, float]]:
+    """(time, operation, allowance_s): how the twin puts its sensor where an imported actuator trace's steps had
+    it, when the trace has no stage positions: the lab's sensor touched the tip in blocked (and stiffness) steps and
+    was clear of it in free ones. The twin finds contact with the actuator protocol's own search before the first
+    touching step (and again after a free step), and homes (clear) before a free step after touching ones. Each is
+    given an allowance (a worst-case duration: the steps after it are replayed that much later, so the search never
+    makes the twin skip drive samples); `compare` aligns steps by their starts, so the shift does not matter there."""
+    if fixture != "actuator" or any(t in reader.topics() for t in (Topic.STAGE_COMMAND, Topic.STAGE_POSITION)):
+        return []
+    from hamr_bench.protocols.actuator import Params
+
+    c = Params().contact
+    n_steps = c.max_travel_m / c.coarse_step_m + 2 * (c.clearance_m + 2 * c.coarse_step_m) / c.fine_step_m
+    search_s = n_steps * (FORCE_WINDOW_S + CONTACT_STEP_S)
+    search = FindContact(c.threshold_N, c.coarse_step_m, c.fine_step_m, c.max_travel_m, clearance_m=c.clearance_m)
+    out = []
+    touching = False
+    for e in events:
+        if e.kind != EventKind.STEP:
+            continue
+        mode = e.data.get("mode", "")
+        if mode in ("blocked", "stiffness") and not touching:
+            out.append((e.time_s - STEP_LEAD_S - DRIVE_LEAD_S, search, search_s))
+            touching = True
+        elif mode == "free" and touching:
+            out.append((e.time_s - STEP_LEAD_S - DRIVE_LEAD_S, Home(), HOME_ALLOWANCE_S))
+            touching = False
+    return out
+
+
+def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[Any]:
     timed: list[tuple[float, int, int, Any]] = []  # (anchor time, order key, sequence, item-with-wait)
     seq = 0
 
@@ -153,22 +187,22 @@ def _build_items(reader: Any, events: list[Any]) -> list[Any]:
     kinds = {e.kind for e in events}
     # --- events -> operations
     for e in events:
-        if e.kind == "home":
+        if e.kind == EventKind.HOME:
             add(e.time_s, 0, "pre", Home())
-        elif e.kind == "tare":
+        elif e.kind == EventKind.TARE:
             add(e.time_s, 0, "post", Tare(), TARE_LEAD_S)
-        elif e.kind == "step":
+        elif e.kind == EventKind.STEP:
             add(e.time_s, 0, "post", Step(int(e.step), e.message, dict(e.data)), STEP_LEAD_S)
-        elif e.kind == "set_voltages":
+        elif e.kind == EventKind.SET_VOLTAGES:
             add(e.time_s, 0, "pre", SetVoltages(float(e.data.get("bias_V", 0.0)), float(e.data.get("drive_V", 0.0))))
-        elif e.kind == "contact_found":
+        elif e.kind == EventKind.CONTACT_FOUND:
             add(e.time_s, 0, "note", Note(e.kind, e.message, dict(e.data)))
     # --- stage set-points
-    stage = _scalars(reader, "/stage/command", "target_m")
-    commanded_anything = any(t in reader.topics() for t in ("/stage/command", "/amplifier/bias/command",
-                                                            "/amplifier/drive/command"))
+    stage = _scalars(reader, Topic.STAGE_COMMAND, "target_m")
+    commanded_anything = any(t in reader.topics() for t in (Topic.STAGE_COMMAND, Topic.BIAS_COMMAND,
+                                                            Topic.DRIVE_COMMAND))
     if stage is None and not commanded_anything:  # a trace of measurements only (imported)
-        measured = _scalars(reader, "/stage/position", "position_m")
+        measured = _scalars(reader, Topic.STAGE_POSITION, "position_m")
         if measured is not None:
             stage = _setpoints_from_positions(*measured)
     if stage is not None:
@@ -179,35 +213,45 @@ def _build_items(reader: Any, events: list[Any]) -> list[Any]:
     for t0, rate, samples, track in _drives(reader, events):
         add(t0, 2, "post", ReplayDrive(tuple(samples), rate, t0, track), DRIVE_LEAD_S)
     # --- a source without set_voltages (imported trace): bias each step to its condition's voltage
-    if "set_voltages" not in kinds:
+    if EventKind.SET_VOLTAGES not in kinds:
         for e in events:
-            if e.kind == "step" and isinstance(e.data.get("voltage_V"), (int, float)):
+            if e.kind == EventKind.STEP and isinstance(e.data.get("voltage_V"), (int, float)):
                 add(e.time_s, 0, "note_after", SetVoltages(float(e.data["voltage_V"]), 0.0))
+    moves = _contact_moves(reader, events, fixture)
+    for t, item, _allowance in moves:
+        add(t, -1, "chain", item)
     timed.sort(key=lambda x: (x[0], x[1], x[2]))
-    if "home" not in kinds:  # an imported trace: reference the stage and zero the sensor first
+    if EventKind.HOME not in kinds:  # an imported trace: reference the stage and zero the sensor first
         timed.insert(0, (-math.inf, -1, -2, ("chain", Home(), -math.inf)))
-        if "tare" not in kinds:
+        if EventKind.TARE not in kinds:
             timed.insert(1, (-math.inf, -1, -1, ("chain", Tare(), -math.inf)))
     # The runner records the amplifier monitors once per pass of a dwell, so they show when its passes were;
     # its force averaging during the contact search shows as force samples with no dwell passes around.
-    runner_made = any(t in reader.topics() for t in ("/stage/command", "/amplifier/bias/command",
-                                                     "/amplifier/drive/command"))
+    runner_made = any(t in reader.topics() for t in (Topic.STAGE_COMMAND, Topic.BIAS_COMMAND,
+                                                     Topic.DRIVE_COMMAND))
     monitors = np.unique(_times(reader, MONITOR_TOPICS)) if runner_made else np.zeros(0)
     # A dwell pass records the stage position and the monitors at the same time; the force averaging's periodic
     # checks record monitors alone, so they do not mark a dwell.
-    stage_times = _times(reader, ("/stage/position",))
+    stage_times = _times(reader, (Topic.STAGE_POSITION,))
     monitors = monitors[np.isin(monitors, stage_times)]
-    force = _times(reader, ("/force",))
+    force = _times(reader, (Topic.FORCE,))
     camera = _times(reader, CAMERA_TOPICS)
     items: list[Any] = []
     previous_s = -math.inf
+
+    def shift(t: float) -> float:
+        """Source time -> twin time: later by the allowances of the contact moves before it."""
+        return t + sum(allowance for at, _item, allowance in moves if at <= t)
+
     for anchor_s, _prio, _seq, (kind, item, wait_to) in timed:
+        if isinstance(item, ReplayDrive) and moves:
+            item = replace(item, start_s=shift(item.start_s))
         if kind in ("pre", "post") and math.isfinite(wait_to):
             lo = int(np.searchsorted(monitors, previous_s, side="left"))
             hi = int(np.searchsorted(monitors, anchor_s - 1e-12, side="left"))
             passes = tuple(float(x) for x in monitors[lo:hi])
             items.append(WaitUntil(
-                wait_to, pass_times_s=passes,
+                shift(wait_to), pass_times_s=passes,
                 poll_force=runner_made and not passes and _any_between(force, previous_s, anchor_s),
                 after_query=bool(items) and isinstance(items[-1], Tare),
                 dwell=not runner_made, track=_any_between(camera, previous_s, anchor_s)))
@@ -232,10 +276,10 @@ def _setpoints_from_positions(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray,
 
 def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarray, bool]]:
     """(first sample time, rate, samples, track) per drive_start event."""
-    starts = [i for i, e in enumerate(events) if e.kind == "drive_start"]
+    starts = [i for i, e in enumerate(events) if e.kind == EventKind.DRIVE_START]
     if not starts:
         return []
-    commanded = _scalars(reader, "/amplifier/drive/command", "voltage_V")
+    commanded = _scalars(reader, Topic.DRIVE_COMMAND, "voltage_V")
     end_of_file = max([e.time_s for e in events] + [math.inf])
     out = []
     if commanded is not None:
@@ -243,11 +287,11 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
         claimed = np.zeros(t.size, dtype=bool)
         # set_voltages writes one drive record at or after its event; making the rig safe writes the last one.
         for e in events:
-            if e.kind == "set_voltages":
+            if e.kind == EventKind.SET_VOLTAGES:
                 idx = np.flatnonzero((t >= e.time_s - 1e-12) & ~claimed)
                 if idx.size:
                     claimed[idx[0]] = True
-        if any(e.kind == "safe_state" for e in events) and t.size:
+        if any(e.kind == EventKind.SAFE_STATE for e in events) and t.size:
             claimed[-1] = True
         for i in starts:
             e = events[i]
@@ -255,7 +299,7 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
             n = int(e.data.get("n_samples", 0))
             if not rate > 0:
                 raise RecordingError(f"{reader.path}: drive_start at {e.time_s:.3f} s has sample_rate_Hz={rate!r}")
-            end = next((x.time_s for x in events[i + 1:] if x.kind in ("drive_end", "drive_start")), end_of_file)
+            end = next((x.time_s for x in events[i + 1:] if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
             window = np.flatnonzero(~claimed & (t >= e.time_s - 1.0) & (t <= end + 1e-9))
             # the waveform is the run of records on the grid t0 + k / rate that starts nearest before the event
             before = window[t[window] <= e.time_s + 1e-9]
@@ -278,15 +322,26 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
             claimed[chosen] = True
             out.append((float(t[first]), rate, v[chosen], bool(e.data.get("track", False))))
         return out
-    monitored = _scalars(reader, "/amplifier/drive/monitor", "voltage_V")
+    monitored = _scalars(reader, Topic.DRIVE_MONITOR, "voltage_V")
     if monitored is None:
         raise RecordingError(f"{reader.path}: drive_start events but neither /amplifier/drive/command nor "
                              "/amplifier/drive/monitor to replay the waveform from")
-    t, v = monitored
+    # The drive as the recording contract infers it from the monitor (each cycle's corners and level): the
+    # waveform the monitor measured, without its noise and overshoot, which the twin's amplifier would otherwise
+    # be told to reproduce. Where no cycle is found, the monitor itself.
+    from hamr_bench.recording.steps import parse_run
+
+    timelines = parse_run(reader).timelines
+    if timelines.sources.get("drive") == "inferred" and timelines.drive[0].size:
+        knots_t, knots_v = timelines.drive
+        t = monitored[0]
+        v = np.interp(t, knots_t, knots_v, left=0.0, right=0.0)
+    else:
+        t, v = monitored
     for i in starts:
         e = events[i]
         rate = float(e.data.get("sample_rate_Hz", 0.0))
-        end = next((x.time_s for x in events[i + 1:] if x.kind in ("drive_end", "drive_start")), end_of_file)
+        end = next((x.time_s for x in events[i + 1:] if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
         sel = (t >= e.time_s - 1e-9) & (t <= end + 1e-9) & np.isfinite(v)
         if sel.sum() < 2 or not rate > 0:
             continue

@@ -5,7 +5,8 @@ figures (analysis/figures.py)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -39,6 +40,51 @@ def paper_values(kind: str, key: int) -> dict[str, float]:
     return {"k_ser": d.k_ser_N_per_m, "kappa_1": k1, "kappa_2": k2, "kappa_3": k3, "bias": d.bias_m}
 
 
+def recordings_table(dataset: Dataset) -> list[str]:
+    """What was read: per run (a file, or one specimen of a file), its specimen, session and where its drive and
+    stage timelines came from (commanded, inferred from the measured drive, measured), then the sessions."""
+    md = ["## Recordings", "", "| file | specimen | protocol | design | layers | source | timelines (bias / drive "
+          "/ stage) | session | exit | observations |", "|---|---|---|---|---|---|---|---|---|---|"]
+    sessions: dict[str, list[str]] = {}
+    for k, r in enumerate(dataset.runs):
+        i = r.info
+        tl = " / ".join(i.timelines.get(c, "-") for c in ("bias", "drive", "stage")) if i.timelines else "-"
+        session = i.session or f"run {k}"
+        name = Path(i.path).name
+        sessions.setdefault(session, []).append(name + (f" ({i.specimen})" if i.specimen else ""))
+        md.append(f"| {name} | {i.specimen or '-'} | {i.protocol} | {i.design or '-'} | {i.layers} | {i.source} | "
+                  f"{tl} | {_session_label(session)} | {i.exit_status or 'unfinished'} | {len(r.observations)} |")
+    md += ["", "Sessions (one specimen mounted once; their nuisances, the zero offsets, are shared by their "
+           "recordings; rule: docs/log-format.md, Sessions):", ""]
+    for key, names in sessions.items():
+        md.append(f"- {_session_label(key)}: {', '.join(names)}")
+    return md + [""]
+
+
+def _session_label(key: str) -> str:
+    if key.startswith("recording="):
+        return "own (contact search)"
+    return key.replace("|", " ").replace("default ", "default: ")
+
+
+def specimens_table(g: Any) -> list[str]:
+    """Per-specimen values of a group fitted per specimen, with the population row (mean, between-specimen SD)."""
+    if not g.specimens:
+        return []
+    names = [n for n, d in g.derived.items() if isinstance(d, dict) and "between_specimen_sd" in d]
+    if not names:
+        return []
+    md = ["", f"Specimens ({len(g.specimens)}; fitted one by one, scatter between them modelled, not lack of fit):",
+          "", "| specimen | " + " | ".join(f"{n} ({g.derived[n]['unit']})" for n in names) + " |",
+          "|---|" + "---|" * len(names)]
+    for label, sg in g.specimens.items():
+        md.append(f"| {label} | " + " | ".join(f"{sg.derived[n]['value']:.4g}" if n in sg.derived else "-"
+                                               for n in names) + " |")
+    md.append("| mean +- SD | " + " | ".join(f"{g.derived[n]['value']:.4g} +- {g.derived[n]['between_specimen_sd']:.2g}"
+                                            for n in names) + " |")
+    return md
+
+
 def static_check(dataset: Dataset, fit: FitReport) -> list[str]:
     """RMS of the fitted model against the static recordings, which the fit did not use (only each static run's
     own zero-sag offset is fitted, with the transmission held at the fit)."""
@@ -69,13 +115,7 @@ def write_report(recordings: Iterable[Path], out_dir: Path, method: str = "least
     fit = fit_dataset(dataset, method)
     figures = all_figures(dataset, fit, out_dir)
     md = ["# hamr-bench report", ""]
-    md += ["## Recordings", "", "| file | protocol | design | layers | exit | observations |",
-           "|---|---|---|---|---|---|"]
-    for r in dataset.runs:
-        i = r.info
-        md.append(f"| {Path(i.path).name} | {i.protocol} | {i.design or '-'} | {i.layers} | "
-                  f"{i.exit_status or 'unfinished'}"
-                  f" | {len(r.observations)} |")
+    md += recordings_table(dataset)
     md += ["", f"Fit method: **{method}**; intervals: 95 % profile likelihood (noise scale from the fit). "
            "Status 'not identifiable' means the profile stays under the 95 % threshold across the whole search "
            "range: the value is then the reference it started from, not a measurement.", ""]
@@ -92,8 +132,8 @@ def write_report(recordings: Iterable[Path], out_dir: Path, method: str = "least
                 rms.append(f"force RMS {g.rms_N * 1e3:.3g} mN")
             if g.rms_m is not None:
                 rms.append(f"displacement RMS {g.rms_m * 1e6:.3g} um")
-            md += [f"### {head}", "", f"{g.n_observations} observations; {'; '.join(rms)}; reduced chi2 "
-                   f"{g.chi2 / g.dof:.3g}" if g.dof > 0 else f"{g.n_observations} observations", "",
+            chi2 = f"; reduced chi2 {g.chi2 / g.dof:.3g}" if g.dof > 0 else ""
+            md += [f"### {head}", "", f"{g.n_observations} observations; {'; '.join(rms)}{chi2}", "",
                    "| parameter | unit | fitted | 95 % interval | status | paper |", "|---|---|---|---|---|---|"]
             for p in g.params.values():
                 u = SCALE.get(p.unit, (1.0, p.unit))[1]
@@ -106,6 +146,7 @@ def write_report(recordings: Iterable[Path], out_dir: Path, method: str = "least
                        "|---|---|---|---|"]
                 for name, d in derived.items():
                     md.append(f"| {name} | {d['value']:.4g} | {d['ci95'][0]:.4g} .. {d['ci95'][1]:.4g} | {d['unit']} |")
+            md += specimens_table(g)
             if g.warnings:
                 md += [""] + [f"- warning: {w}" for w in g.warnings]
             md.append("")

@@ -11,25 +11,39 @@ phase_labels`' phases:
 
 and an undriven step (the leg's static test, the actuator's stiffness sweep) into one `hold` window. A row is
 the mean of the sensor over its window, averaged over the step's cycles; its standard error comes from the
-cycle-to-cycle scatter pooled over the run's steps of that phase (pure error). Camera rows are relative to the same cycle's low_late window (the camera has no absolute zero).
+cycle-to-cycle scatter pooled over the run's steps of that phase (pure error). Camera rows are relative to the
+same cycle's low_late window (the camera has no absolute zero).
+
+Steps, their cycles and the timelines come from the recording contract's one step parser
+(`hamr_bench.recording.steps.parse_run`, shared with `analysis.dataset`): each cycle's windows follow its own
+corners, COMMANDED (the drive command stream) or INFERRED from the measured drive monitor (an imported trace), so
+a lab's drive timing is used as it was, never the project's defaults.
 
 For the model, each row carries `eval_times_s` (a few points in each of its windows; the prediction is their mean)
 and the run carries the command timelines (bias, drive, stage targets), the contact and tare times, so any
-candidate effect, including memory and stage effects, can be evaluated on exactly what the rig was told to do.
+candidate effect, including memory and stage effects, can be evaluated on exactly what the rig was told to do; for
+an imported run these are the inferred drive and bias and the measured stage (`RunTrace.timelines` says which).
+
+A recording with several specimens (an imported file) gives one RunTrace per specimen/session block, each with
+its `specimen` label and its `session` (the nuisance group, `analysis.sessions`).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import numpy as np
 
+from analysis.sessions import session_key
 from hamr_bench.errors import ConfigError, RecordingError
+from hamr_bench.recording.contract import EventKind, Topic
+from hamr_bench.recording.drive_timing import Cycle
+from hamr_bench.recording.steps import (Block, DriveTiming, ParsedRun, StepRecord, Timelines, open_reader,
+                                        parse_run, sorted_stream)
 
 PHASES = ("low_late", "rise", "high_early", "high_late", "fall")
 
@@ -53,6 +67,11 @@ class Row:
     ref_times_s: np.ndarray | None = None   # camera rows: the same cycles' low-dwell sample times (subtracted)
     ref_cycle: np.ndarray | None = None
     se: float = math.nan
+    # Standard error of the MODEL's value for this row that comes from an inferred drive (0 for a commanded one):
+    # the step's V_bias and the ramps' timing are measured, with the monitor's noise; propagated with the data's
+    # own sensitivities (value / V_bias for the level, the data's slope on a ramp for the timing). Independent of
+    # `se` (the data's pure error): the row's total is sqrt(se^2 + drive_se^2).
+    drive_se: float = 0.0
 
     @property
     def condition(self) -> tuple:
@@ -77,6 +96,22 @@ class RunTrace:
     t_tare_s: float
     t_end_s: float
     rows: list[Row] = field(default_factory=list)
+    # --- added for any lab's recordings (docs/log-format.md, Sessions; /work notes: import.md) ---
+    specimen: str = ""                   # the specimen label ('' = the recording names none: one specimen)
+    session: str = ""                    # nuisance group key (analysis.sessions): runs sharing it share a setup
+    session_rule: str = "recording"      # recording | explicit | default: how `session` was decided
+    timelines: dict[str, str] = field(default_factory=dict)   # bias/drive/stage -> commanded|inferred|measured|absent
+    step_timing: dict[int, DriveTiming] = field(default_factory=dict)   # step index -> its drive timing
+    source: str = "recorded"             # recorded | import-trace | import-points | ...
+    contact: str = "none"                # search (contact_found event) | assumed (imported: zero sag at start) | none
+    force_reads_pull: bool = False       # the force goes clearly negative: the sensor reads pull, no clip at 0
+
+    def provenance(self) -> dict[str, Any]:
+        """JSON-ready: where this run's data and timelines came from, and its grouping."""
+        return {"run": self.index, "path": self.path, "specimen": self.specimen, "session": self.session,
+                "session_rule": self.session_rule, "source": self.source, "timelines": dict(self.timelines),
+                "contact": self.contact, "force_reads_pull": self.force_reads_pull,
+                "drive_timing": {str(k): v.summary() for k, v in sorted(self.step_timing.items())}}
 
 
 @dataclass
@@ -89,14 +124,23 @@ class GapData:
                 "value", "se", "n")
         return {k: np.array([getattr(r, k) for r in self.rows]) for k in keys}
 
+    def sessions(self) -> dict[str, list[int]]:
+        """Session key -> the indices of its runs (the nuisance groups)."""
+        out: dict[str, list[int]] = {}
+        for run in self.runs:
+            out.setdefault(run.session, []).append(run.index)
+        return out
 
-def _sorted_stream(reader: Any, topic: str, name: str) -> tuple[np.ndarray, np.ndarray]:
-    topics = reader.topics()
-    if topic not in topics or not topics[topic].message_count:
-        return np.empty(0), np.empty(0)
-    s = reader.scalars(topic)
-    order = np.argsort(s["time_s"], kind="stable")
-    return np.asarray(s["time_s"])[order], np.asarray(s[name], float)[order]
+    def specimens(self) -> dict[str, list[int]]:
+        """Specimen label -> the indices of its runs."""
+        out: dict[str, list[int]] = {}
+        for run in self.runs:
+            out.setdefault(run.specimen, []).append(run.index)
+        return out
+
+    def provenance(self) -> list[dict[str, Any]]:
+        """Per run, `RunTrace.provenance()`: for `gap --json` and the report."""
+        return [run.provenance() for run in self.runs]
 
 
 def _samples_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
@@ -109,131 +153,186 @@ def _mean_in(t: np.ndarray, y: np.ndarray, a: float, b: float) -> float:
     return float(np.mean(y[i0:i1])) if i1 > i0 else math.nan
 
 
-def _windows(dl: float, r: float, dh: float) -> dict[str, tuple[float, float]]:
-    """Window bounds relative to a cycle's start (the cycle begins with its low dwell)."""
-    hs = dl + r
-    fs = hs + dh
-    return {"low_late": (0.5 * dl, dl), "rise": (dl + 0.5 * r, dl + r), "high_early": (hs, hs + 0.3 * dh),
-            "high_late": (hs + 0.5 * dh, fs), "fall": (fs, fs + 0.5 * r)}
+def cycle_windows(c: Cycle) -> dict[str, tuple[float, float]]:
+    """The phase windows of one cycle, from its own corners (absolute times)."""
+    dl, dh = c.dwell_low_s, c.dwell_high_s
+    return {"low_late": (c.low_start_s + 0.5 * dl, c.rise_start_s),
+            "rise": (c.rise_start_s + 0.5 * c.ramp_up_s, c.high_start_s),
+            "high_early": (c.high_start_s, c.high_start_s + 0.3 * dh),
+            "high_late": (c.high_start_s + 0.5 * dh, c.fall_start_s),
+            "fall": (c.fall_start_s, c.fall_start_s + 0.5 * c.ramp_down_s)}
+
+
+def _in_block(t: np.ndarray, y: np.ndarray, block: Block) -> tuple[np.ndarray, np.ndarray]:
+    i0, i1 = np.searchsorted(t, block.start_s, "left"), np.searchsorted(t, block.end_s, "left")
+    return t[i0:i1], y[i0:i1]
+
+
+def reads_pull(force_N: np.ndarray) -> bool:
+    """True when the force goes clearly negative: a sensor that reads pull (fixed to the tip), not one that only
+    reads push (0 off contact, noise around it)."""
+    f = force_N[np.isfinite(force_N)]
+    if f.size < 10:
+        return False
+    from hamr_bench.recording.drive_timing import noise_sigma
+
+    top = float(np.percentile(f, 99))
+    return float(np.percentile(f, 1)) < -max(6.0 * noise_sigma(f), 0.05 * max(top, 0.0))
+
+
+def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors: dict[str, tuple]) -> None:
+    if step.drive is None or not step.drive.cycles:
+        return
+    quantity = "displacement_m" if step.tracked else "force_N"
+    t_s, y_s = sensors[quantity]
+    if t_s.size == 0:
+        return
+    tracked = step.tracked
+    cycles = step.drive.cycles
+    windows = [cycle_windows(c) for c in cycles]
+    refs = [_samples_in(t_s, *w["low_late"]) for w in windows] if tracked else None
+    made: dict[str, Row] = {}
+    for p in PHASES:
+        if tracked and p == "low_late":
+            continue
+        vals, pts = [], []
+        for w in windows:
+            ref = _mean_in(t_s, y_s, *w["low_late"]) if tracked else 0.0
+            vals.append(_mean_in(t_s, y_s, *w[p]) - ref)
+            pts.append(_samples_in(t_s, *w[p]))
+        v = np.asarray(vals)
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            continue
+        keep = [c for c in range(len(cycles)) if pts[c].size and (refs is None or refs[c].size)]
+        if not keep:
+            continue
+        row = Row(quantity=quantity, phase=p, value=float(v.mean()), n=int(v.size),
+                  eval_times_s=np.concatenate([pts[c] for c in keep]),
+                  eval_cycle=np.concatenate([np.full(pts[c].size, c) for c in keep]),
+                  ref_times_s=None if refs is None else np.concatenate([refs[c] for c in keep]),
+                  ref_cycle=None if refs is None else np.concatenate([np.full(refs[c].size, c) for c in keep]),
+                  **base)
+        row._cycle_values = v  # type: ignore[attr-defined]
+        run.rows.append(row)
+        made[p] = row
+    if step.drive.source == "inferred":
+        _drive_uncertainty(made, step.drive)
+
+
+def _drive_uncertainty(rows: dict[str, Row], drive: DriveTiming) -> None:
+    """`Row.drive_se` of one inferred step's rows: the level's error (shared by the step's cycles) scales every
+    row's value; a ramp's timing error (independent per cycle) moves a ramp row by the data's slope there."""
+    low = rows["low_late"].value if "low_late" in rows else 0.0
+    high = rows["high_early"].value if "high_early" in rows else math.nan
+    n = len(drive.cycles)
+    ramps = {"rise": (drive.ramp_up_s, [c.rise_se_s for c in drive.cycles]),
+             "fall": (drive.ramp_down_s, [c.fall_se_s for c in drive.cycles])}
+    for phase, row in rows.items():
+        level = abs(row.value) * drive.bias_se_V / drive.bias_V if drive.bias_V > 0 else 0.0
+        timing = 0.0
+        if phase in ramps and math.isfinite(high):
+            ramp_s, ses = ramps[phase]
+            slope = abs(high - low) / ramp_s if ramp_s > 0 else 0.0
+            timing = slope * math.sqrt(float(np.mean(np.square(ses)))) / math.sqrt(n) if ses else 0.0
+        row.drive_se = math.hypot(level, timing) if math.isfinite(level) and math.isfinite(timing) else 0.0
+
+
+def _hold_row(run: RunTrace, step: StepRecord, base: dict[str, Any], tf: np.ndarray, force: np.ndarray) -> None:
+    if step.hold_window_s is None or tf.size == 0:
+        return
+    a, b = step.hold_window_s
+    i0, i1 = np.searchsorted(tf, a, "left"), np.searchsorted(tf, b, "right")
+    if i1 - i0 < 2:
+        return
+    seg = force[i0:i1]
+    row = Row(quantity="force_N", phase="hold", value=float(seg.mean()), n=int(seg.size),
+              eval_times_s=tf[i0:i1], eval_cycle=np.zeros(i1 - i0, int), **base)
+    # white-noise standard error of the hold mean; pooled below like the cycles
+    row._cycle_values = seg  # type: ignore[attr-defined]
+    run.rows.append(row)
+
+
+def _stage_as_sag(parsed: ParsedRun, timelines: Timelines, t_contact_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """An imported run's measured stage set-points as sag (the importer's zero and sign), with a zero-sag sample
+    at the assumed contact time, so RunEngine's 'position relative to the contact' is the sag."""
+    t, x = timelines.stage
+    if t.size == 0:
+        return t, x
+    extra = parsed.meta.run_extra
+    try:
+        zero = float(extra.get("zero_sag_m", "nan"))
+        sign = float(extra.get("toward_leg_sign", "1") or 1.0)
+    except ValueError:
+        zero, sign = math.nan, 1.0
+    if not math.isfinite(zero):
+        zero = float(x[0])
+    return np.r_[t_contact_s, t], np.r_[0.0, (x - zero) * sign]
+
+
+def load_runs(path: Path | str, first_index: int = 0) -> list[RunTrace]:
+    """One RunTrace per specimen/session block of a recording (a native run: one), indexed from `first_index`."""
+    reader = open_reader(path)
+    parsed = parse_run(reader)
+    reader_streams = {"force_N": sorted_stream(reader, Topic.FORCE, "force_N"),
+                      "displacement_m": sorted_stream(reader, Topic.CAMERA_DISPLACEMENT, "displacement_m")}
+    meta = parsed.meta
+    blocks = parsed.blocks()
+    contact_events = [e.time_s for e in parsed.events if e.kind == EventKind.CONTACT_FOUND]
+    tare = [e.time_s for e in parsed.events if e.kind == EventKind.TARE]
+    out = []
+    for b_i, block in enumerate(blocks):
+        steps = [s for s in parsed.steps if block.start_s <= s.start_s < block.end_s] if len(blocks) > 1 \
+            else parsed.steps
+        timelines = parsed.timelines.window(block.start_s, block.end_s) if len(blocks) > 1 else parsed.timelines
+        contact = [t for t in contact_events if block.start_s <= t < block.end_s] if len(blocks) > 1 \
+            else contact_events
+        tf, force = _in_block(*reader_streams["force_N"], block)
+        tc, disp = _in_block(*reader_streams["displacement_m"], block)
+        if contact:
+            t_contact: float | None = contact[0]
+            contact_kind = "search"
+            stage = timelines.stage
+        elif steps and meta.imported:
+            # no contact search: the stage reference is the importer's zero sag, assumed touching at the start
+            t_contact = min(s.start_s for s in steps) - 1e-3
+            contact_kind = "assumed"
+            stage = _stage_as_sag(parsed, timelines, t_contact) if timelines.sources.get("stage") == "measured" \
+                else timelines.stage
+        else:
+            t_contact, contact_kind, stage = None, "none", timelines.stage
+        specimen = block.specimen
+        fixture = meta.fixture_kind
+        session, rule = session_key(parsed.path, meta, specimen, block.session, fixture,
+                                    contact_kind == "search")
+        run = RunTrace(
+            index=first_index + b_i, path=parsed.path, protocol=meta.protocol, fixture=fixture, design=meta.design,
+            layers=meta.layers, params_set=meta.params_set, model_params=meta.model_params,
+            bias_cmd=timelines.bias, drive_cmd=timelines.drive, stage_cmd=stage,
+            t_contact_s=t_contact, t_tare_s=tare[0] if tare else 0.0,
+            t_end_s=float(parsed.events[-1].time_s) if parsed.events else 0.0,
+            specimen=specimen, session=session, session_rule=rule, timelines=dict(timelines.sources),
+            source=meta.source, contact=contact_kind, force_reads_pull=reads_pull(force))
+        if len(blocks) > 1:
+            run.t_end_s = block.end_s
+        sensors = {"force_N": (tf, force), "displacement_m": (tc, disp)}
+        for step in steps:
+            base = dict(run=run.index, protocol=step.protocol, mode=step.mode, voltage_V=step.voltage_V,
+                        sag_m=step.sag_m, repetition=step.repetition, direction=step.direction, step=step.index)
+            if step.kind == "driven":
+                if step.drive is not None:
+                    run.step_timing[step.index] = step.drive
+                _driven_rows(run, step, base, sensors)
+            elif step.kind == "hold" and (step.protocol == "static" or step.mode == "stiffness"):
+                _hold_row(run, step, base, tf, force)
+        _pool_standard_errors(run)
+        out.append(run)
+    return out
 
 
 def load_run(path: Path | str, index: int) -> RunTrace:
-    from hamr_bench.recording import RecordingReader, RecordingWarning
-
-    path = Path(path)
-    if not path.exists():
-        raise RecordingError(f"{path}: no such recording")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RecordingWarning)
-        reader = RecordingReader(path)
-    meta = reader.metadata()
-    proto_md, design_md = meta.get("protocol", {}), meta.get("design", {})
-    protocol = proto_md.get("name", "")
-    if not protocol:
-        raise RecordingError(f"{path}: metadata 'protocol' has no 'name' (not a hamr-bench run recording?)")
-    try:
-        params = json.loads(proto_md.get("params") or "{}")
-        model_params = json.loads(design_md.get("model_params") or "{}")
-    except ValueError:
-        raise RecordingError(f"{path}: metadata protocol.params or design.model_params is not JSON") from None
-    fixture = design_md.get("fixture") or ("actuator" if protocol == "actuator" else "leg")
-    design_text = design_md.get("design", "")
-    design = int(design_text) if design_text.strip().isdigit() else None
-    layers = int(design_md.get("layers", "2") or 2)
-    events = sorted(reader.events(), key=lambda e: e.time_s)
-    contact = [e.time_s for e in events if e.kind == "contact_found"]
-    tare = [e.time_s for e in events if e.kind == "tare"]
-    tf, force = _sorted_stream(reader, "/force", "force_N")
-    tc, disp = _sorted_stream(reader, "/camera/displacement", "displacement_m")
-    run = RunTrace(
-        index=index, path=str(path), protocol=protocol, fixture=fixture, design=design, layers=layers,
-        params_set=design_md.get("params_set", "effective") or "effective", model_params=model_params,
-        bias_cmd=_sorted_stream(reader, "/amplifier/bias/command", "voltage_V"),
-        drive_cmd=_sorted_stream(reader, "/amplifier/drive/command", "voltage_V"),
-        stage_cmd=_sorted_stream(reader, "/stage/command", "target_m"),
-        t_contact_s=contact[0] if contact else None, t_tare_s=tare[0] if tare else 0.0,
-        t_end_s=float(events[-1].time_s) if events else 0.0)
-    drive = params.get("drive", {}) or {}
-    dl, r, dh = (float(drive.get(k, d)) for k, d in (("dwell_low_s", 0.4), ("ramp_s", 0.05), ("dwell_high_s", 0.4)))
-    period = dl + 2 * r + dh
-    rel = _windows(dl, r, dh)
-    hold_s = params.get("hold_s")
-    stiff_hold_s = (params.get("stiffness") or {}).get("hold_s")
-    steps = [i for i, e in enumerate(events) if e.kind == "step"]
-    for n, i in enumerate(steps):
-        ev = events[i]
-        t_next = events[steps[n + 1]].time_s if n + 1 < len(steps) else math.inf
-        inside = [e for e in events[i + 1:] if e.time_s <= t_next and e.kind != "step"]
-        cond = ev.data
-        mode = str(cond.get("mode", ""))
-        base = dict(run=index, protocol=protocol, mode=mode, voltage_V=float(cond.get("voltage_V", 0.0) or 0.0),
-                    sag_m=float(cond.get("sag_m", 0.0) or 0.0), repetition=int(cond.get("repetition", 0) or 0),
-                    direction=str(cond.get("direction", "up")), step=int(ev.step if hasattr(ev, "step") else n))
-        starts = [e for e in inside if e.kind == "drive_start"]
-        if starts:
-            st = starts[0]
-            n_samples = int(st.data.get("n_samples", 0) or 0)
-            rate = float(st.data.get("sample_rate_Hz", 1000.0) or 1000.0)
-            td = run.drive_cmd[0]
-            j = np.searchsorted(td, st.time_s - 0.5, "left")
-            seg = td[j:np.searchsorted(td, st.time_s + n_samples / rate + 1.0, "right")]
-            # the waveform's first sample: the first command at or after drive_start minus a small tolerance
-            k = np.searchsorted(seg, st.time_s - 1e-3, "left")
-            if k >= seg.size:
-                continue
-            t0 = float(seg[k])
-            n_cycles = max(1, int(round((n_samples - 1) / rate / period))) if n_samples else int(drive.get("cycles", 1))
-            tracked = bool(st.data.get("track", False)) or protocol == "free-displacement" or mode == "free"
-            t_s, y_s, quantity = (tc, disp, "displacement_m") if tracked else (tf, force, "force_N")
-            if t_s.size == 0:
-                continue
-            per_phase: dict[str, list[float]] = {p: [] for p in PHASES}
-            pts: dict[str, list[np.ndarray]] = {p: [] for p in PHASES}
-            for c in range(n_cycles):
-                c0 = t0 + c * period
-                ref = _mean_in(t_s, y_s, c0 + rel["low_late"][0], c0 + rel["low_late"][1]) if tracked else 0.0
-                for p in PHASES:
-                    a, b = rel[p]
-                    per_phase[p].append(_mean_in(t_s, y_s, c0 + a, c0 + b) - ref)
-                    pts[p].append(_samples_in(t_s, c0 + a, c0 + b))
-            for p in PHASES:
-                if tracked and p == "low_late":
-                    continue
-                vals = np.asarray(per_phase[p])
-                vals = vals[np.isfinite(vals)]
-                if vals.size == 0:
-                    continue
-                refs = None
-                if tracked:
-                    refs = [_samples_in(t_s, t0 + c * period + rel["low_late"][0], t0 + c * period + rel["low_late"][1])
-                            for c in range(n_cycles)]
-                keep = [c for c in range(n_cycles) if pts[p][c].size and (refs is None or refs[c].size)]
-                if not keep:
-                    continue
-                row = Row(quantity=quantity, phase=p, value=float(vals.mean()), n=int(vals.size),
-                          eval_times_s=np.concatenate([pts[p][c] for c in keep]),
-                          eval_cycle=np.concatenate([np.full(pts[p][c].size, c) for c in keep]),
-                          ref_times_s=None if refs is None else np.concatenate([refs[c] for c in keep]),
-                          ref_cycle=None if refs is None else np.concatenate([np.full(refs[c].size, c) for c in keep]),
-                          **base)
-                row._cycle_values = vals  # type: ignore[attr-defined]
-                run.rows.append(row)
-        elif tf.size and (protocol == "static" or mode == "stiffness"):
-            # undriven hold: the leg's static test, or the actuator's stiffness sweep (its own hold time)
-            h_rec = stiff_hold_s if mode == "stiffness" else hold_s
-            h = float(h_rec) if h_rec else 0.5
-            a, b = ev.time_s, min(ev.time_s + h, t_next)
-            i0, i1 = np.searchsorted(tf, a, "left"), np.searchsorted(tf, b, "right")
-            if i1 - i0 < 2:
-                continue
-            seg = force[i0:i1]
-            row = Row(quantity="force_N", phase="hold", value=float(seg.mean()), n=int(seg.size),
-                      eval_times_s=tf[i0:i1], eval_cycle=np.zeros(i1 - i0, int), **base)
-            # white-noise standard error of the hold mean; pooled below like the cycles
-            row._cycle_values = seg  # type: ignore[attr-defined]
-            run.rows.append(row)
-    _pool_standard_errors(run)
-    return run
+    """The first (for a native run: the only) RunTrace of a recording; `load_runs` gives every specimen's."""
+    return load_runs(path, index)[0]
 
 
 def _pool_standard_errors(run: RunTrace) -> None:
@@ -249,13 +348,14 @@ def _pool_standard_errors(run: RunTrace) -> None:
             r.se = math.sqrt(var / r.n) if np.isfinite(var) else math.nan
 
 
-def _load_run_task(args: tuple[Path, int]) -> Any:
-    return load_run(*args)
+def _load_runs_task(path: Path) -> list[RunTrace]:
+    return load_runs(path, 0)
 
 
 def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: Any = None) -> GapData:
     """Read recordings (files, or directories searched for *.mcap); `jobs` local processes or a Dask `scheduler`
-    read them in parallel (analysis.parallel; jobs=1 reads in this process)."""
+    read them in parallel (analysis.parallel; jobs=1 reads in this process). Runs are numbered in file order,
+    each file's specimen blocks in time order."""
     files: list[Path] = []
     for p in paths:
         p = Path(p)
@@ -263,11 +363,16 @@ def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: 
     if not files:
         raise ConfigError("no recordings given (expected .mcap files or directories holding them)")
     if jobs == 1 and scheduler is None:
-        runs = [load_run(f, i) for i, f in enumerate(files)]
+        per_file = [load_runs(f, 0) for f in files]
     else:
         from analysis.parallel import parallel_map
 
-        runs = parallel_map(_load_run_task, [(f, i) for i, f in enumerate(files)], jobs=jobs, scheduler=scheduler)
+        per_file = parallel_map(_load_runs_task, files, jobs=jobs, scheduler=scheduler)
+    runs = [run for group in per_file for run in group]
+    for k, run in enumerate(runs):
+        run.index = k
+        for row in run.rows:
+            row.run = k
     rows = [r for run in runs for r in run.rows]
     if not rows:
         raise RecordingError(f"{files[0]}: no driven or static steps to compare with the model")

@@ -50,7 +50,9 @@ class Problem:
         self.engines = [RunEngine(run, fit_params) for run in data.runs]
         self.rows = data.rows
         self.y = np.array([r.value for r in self.rows])
-        se = np.array([r.se for r in self.rows], float)
+        # pure error, and where the drive was inferred from a measured monitor, the model's own error from it
+        se = np.array([math.hypot(r.se, getattr(r, "drive_se", 0.0)) if np.isfinite(r.se) else r.se
+                       for r in self.rows], float)
         self.run_of = np.array([r.run for r in self.rows])
         # rows with no pure-error estimate get their run's median (never zero: a floor of 1e-9 of the scale)
         for k in np.unique(self.run_of):

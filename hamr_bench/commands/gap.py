@@ -46,7 +46,7 @@ def load_params(path: Path | None) -> dict | None:
 
 def to_json(result: dict) -> dict:
     keys = ("where", "ranking", "best", "gap_above_noise", "nominal_lack_of_fit", "phase_map", "screening",
-            "signature_cos", "sensor_lag_s", "heldout_units", "elapsed_s")
+            "signature_cos", "sensor_lag_s", "heldout_units", "elapsed_s", "recordings")
     return {k: result[k] for k in keys if k in result}
 
 
@@ -81,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
     params = load_params(args.params)
     data = load_gap_data(args.recordings, jobs=args.jobs, scheduler=args.scheduler)
     result = diagnose(data, params, names, seed=args.seed)
+    # per run: its specimen, session (the nuisance grouping) and which timelines were commanded or inferred
+    result["recordings"] = data.provenance()
     result["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
     if args.report:
         from analysis.gap.report import write_report

@@ -4,6 +4,11 @@ Topic names, event kinds and metadata record names are spelled here and nowhere 
 importer, replay) and readers (the dataset, the gap diagnosis, `info`) import them. `docs/log-format.md` is the
 human-readable form. The enums are `StrEnum`s, so a member compares equal to the string stored in the file and
 recordings written before this module existed read unchanged.
+
+The typed parts of the contract live in sibling modules and are re-exported here (imported lazily, since they
+import this module's names): `RunMetadata` (the run's metadata records, `run_metadata.py`), `iter_steps`,
+`parse_run`, `read_run`, `StepRecord`, `DriveTiming`, `Timelines` (the one step parser, `steps.py`) and `Cycle`,
+`infer_cycles` (drive timing from a waveform, `drive_timing.py`).
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ class EventKind(StrEnum):
     DRIVE_START = "drive_start"
     DRIVE_END = "drive_end"
     MEASUREMENT = "measurement"
+    SPECIMEN = "specimen"
     SAFE_STATE = "safe_state"
     RUN_END = "run_end"
 
@@ -65,3 +71,20 @@ class MetadataName(StrEnum):
     RUN = "run"
     REPLAY = "replay"
     RUN_END = "run_end"
+
+
+_LAZY = {
+    "RunMetadata": "run_metadata",
+    "iter_steps": "steps", "parse_run": "steps", "read_run": "steps", "StepRecord": "steps",
+    "DriveTiming": "steps", "Timelines": "steps", "ParsedRun": "steps", "Block": "steps",
+    "Cycle": "drive_timing", "infer_cycles": "drive_timing",
+}
+
+
+def __getattr__(name: str) -> object:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    return getattr(import_module(f"hamr_bench.recording.{module}"), name)

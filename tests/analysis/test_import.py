@@ -139,3 +139,64 @@ def test_cli_import_points_then_fit(tmp_path, capsys):
 
     report = json.loads(out[out.index("{"):])
     assert report["designs"]["3"]["k_ser"]["value"] == pytest.approx(2600.0, rel=0.02)
+
+
+def test_points_with_specimens_fit_per_specimen_with_the_population(tmp_path, capsys):
+    # three actuators of one build, each measured at three voltages (blocked force and stroke), scatter of +-5 %
+    import json
+
+    from hamr_bench.model import actuator as act
+    from hamr_bench.model import actuator_preset
+
+    a = actuator_preset(2, "effective")
+    c, s = act.force_per_volt(a), act.displacement_per_volt(a)
+    scale = {"s1": 1.0, "s2": 1.05, "s3": 0.96}
+    rng = np.random.default_rng(3)
+    path = tmp_path / "points.csv"
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh, delimiter=";")
+        w.writerow(POINT_COLUMNS + ("specimen",))
+        for label, k in scale.items():
+            for rep in range(2):
+                for v in (100.0, 150.0, 200.0, 250.0):
+                    f = k * c * v + rng.normal(0, 0.3e-3)
+                    d = 2 * k * s * v + rng.normal(0, 0.2e-6)
+                    w.writerow(["actuator", "", 2, str(v).replace(".", ","), 0, rep, str(f).replace(".", ","),
+                                str(d).replace(".", ","), label])
+    assert main(["import", "points", str(path), "--out", str(tmp_path / "p.mcap")]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "p.mcap"), "--json", "--jobs", "1"]) == 0
+    group = json.loads(capsys.readouterr().out)["actuators"]["2"]
+    assert set(group["specimens"]) == set(scale)
+    for label, k in scale.items():
+        got = group["specimens"][label]["derived"]["force_per_volt"]["value"]
+        assert got == pytest.approx(k * c, rel=0.01)
+    pop = group["derived"]["force_per_volt"]
+    assert pop["between_specimen_sd"] == pytest.approx(np.std([k * c for k in scale.values()], ddof=1), rel=0.1)
+    assert pop["ci95"][0] <= np.mean([k * c for k in scale.values()]) <= pop["ci95"][1]
+
+
+def test_sessions_group_files_by_default_and_split_by_name(tmp_path):
+    # the same specimen's 150 V and 250 V blocked steps in two files: by default one session (one offset); with
+    # --session each file its own
+    from analysis.dataset import load_dataset
+
+    p = powertrain(3)
+    paths = []
+    for v in (150.0, 250.0):
+        path = tmp_path / f"t{int(v)}.csv"
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["time_s", "voltage_V", "stage_position_m", "force_N", "displacement_m"])
+            w.writerows(_trace_rows([v], 0.0, p))
+        paths.append(path)
+    for i, path in enumerate(paths):
+        assert main(["import", "trace", str(path), "--protocol", "blocked-force", "--design", "3", "--out",
+                     str(tmp_path / f"d{i}.mcap")]) == 0
+        assert main(["import", "trace", str(path), "--protocol", "blocked-force", "--design", "3", "--session",
+                     f"day{i}", "--out", str(tmp_path / f"s{i}.mcap")]) == 0
+    grouped = load_dataset([tmp_path / "d0.mcap", tmp_path / "d1.mcap"])
+    assert len({r.info.session for r in grouped.runs}) == 1
+    assert {r.info.session_rule for r in grouped.runs} == {"default"}
+    named = load_dataset([tmp_path / "s0.mcap", tmp_path / "s1.mcap"])
+    assert [r.info.session for r in named.runs] == ["session=day0|specimen=", "session=day1|specimen="]
