@@ -145,6 +145,19 @@ def _sniff(path: Path, text: str, required: tuple[str, ...]) -> str:
     return best
 
 
+def _check_header(path: Path, head_line: int, header: list[str], required: tuple[str, ...], delim: str) -> None:
+    """One line naming the file and line when the header lacks a required column or repeats one."""
+    missing = [c for c in required if c not in header]
+    if missing:
+        shown = ", ".join(_show(c, 20) for c in header[:8]) + (", ..." if len(header) > 8 else "")
+        raise ConfigError(f"{path}:{head_line}: header lacks column(s) {', '.join(missing)} "
+                          f"(expected {', '.join(required)}; read {len(header)} cell(s) split at "
+                          f"{'tab' if delim == chr(9) else repr(delim)}: {shown})")
+    dupes = sorted({c for c in header if c and header.count(c) > 1})
+    if dupes:
+        raise ConfigError(f"{path}:{head_line}: column {dupes[0]} appears more than once in the header")
+
+
 def read_table(path: Path, required: tuple[str, ...], delimiter: str | None = None) -> Table:
     """Read a CSV table whose header must hold `required` (see the module docstring)."""
     path = Path(path)
@@ -167,15 +180,7 @@ def read_table(path: Path, required: tuple[str, ...], delimiter: str | None = No
         raise ConfigError(f"{path}: empty file (expected a header line with {', '.join(required)})")
     head_line, head = rows[0]
     header = [c.strip() for c in head]
-    missing = [c for c in required if c not in header]
-    if missing:
-        shown = ", ".join(_show(c, 20) for c in header[:8]) + (", ..." if len(header) > 8 else "")
-        raise ConfigError(f"{path}:{head_line}: header lacks column(s) {', '.join(missing)} "
-                          f"(expected {', '.join(required)}; read {len(header)} cell(s) split at "
-                          f"{'tab' if delim == chr(9) else repr(delim)}: {shown})")
-    dupes = sorted({c for c in header if c and header.count(c) > 1})
-    if dupes:
-        raise ConfigError(f"{path}:{head_line}: column {dupes[0]} appears more than once in the header")
+    _check_header(path, head_line, header, required, delim)
     body = []
     for line, row in rows[1:]:
         if len(row) > len(header):

@@ -220,6 +220,25 @@ def _preload(tf: np.ndarray, force: np.ndarray, events: list[Any]) -> tuple[floa
     return float(window.mean()), float(window.std(ddof=1) / math.sqrt(window.size)) if window.size > 1 else 0.0
 
 
+def _driven_observations(step: StepRecord, base: dict[str, Any], tf: np.ndarray, force: np.ndarray,
+                         tc: np.ndarray, disp: np.ndarray) -> list[Observation]:
+    """A driven step: stroke (camera, high dwell minus low dwell) and force (high dwells), averaged over cycles."""
+    out: list[Observation] = []
+    if step.drive is None or not step.drive.cycles:
+        return out
+    cycles = [_windows(c, step.settle_s) for c in step.drive.cycles]
+    if step.tracked and tc.size:
+        strokes = [_mean_in(tc, disp, *hi) - _mean_in(tc, disp, *lo) for lo, hi in cycles]
+        mean, spread, k = _stats(strokes)
+        if k:
+            out.append(Observation(quantity="displacement_m", value=mean, spread=spread, n_cycles=k, **base))
+    if (not step.tracked or step.mode == "blocked") and tf.size:
+        mean, spread, k = _stats([_mean_in(tf, force, *hi) for _lo, hi in cycles])
+        if k:
+            out.append(Observation(quantity="force_N", value=mean, spread=spread, n_cycles=k, **base))
+    return out
+
+
 def _step_observations(step: StepRecord, base: dict[str, Any], tf: np.ndarray, force: np.ndarray,
                        tc: np.ndarray, disp: np.ndarray) -> list[Observation]:
     """What one step measures (module docstring)."""
@@ -228,18 +247,7 @@ def _step_observations(step: StepRecord, base: dict[str, Any], tf: np.ndarray, f
         for q, v in step.measured.items():
             out.append(Observation(quantity=q, value=v, spread=math.nan, n_cycles=1, **base))
     elif step.kind == "driven":
-        if step.drive is None or not step.drive.cycles:
-            return out
-        cycles = [_windows(c, step.settle_s) for c in step.drive.cycles]
-        if step.tracked and tc.size:
-            strokes = [_mean_in(tc, disp, *hi) - _mean_in(tc, disp, *lo) for lo, hi in cycles]
-            mean, spread, k = _stats(strokes)
-            if k:
-                out.append(Observation(quantity="displacement_m", value=mean, spread=spread, n_cycles=k, **base))
-        if (not step.tracked or step.mode == "blocked") and tf.size:
-            mean, spread, k = _stats([_mean_in(tf, force, *hi) for _lo, hi in cycles])
-            if k:
-                out.append(Observation(quantity="force_N", value=mean, spread=spread, n_cycles=k, **base))
+        out += _driven_observations(step, base, tf, force, tc, disp)
     elif step.hold_window_s is not None and tf.size:
         # undriven step (static leg, or the actuator's stiffness sweep): the force over its hold window
         a, b = step.hold_window_s

@@ -261,13 +261,14 @@ def _actuator_base(dataset: Dataset, obs: list[Observation], layers: int) -> Act
     # the runner writes {"actuator": {field: value}, "design": {...}}; a flat {field: value} is accepted too.
     # Only the actuator is taken: the design's values are what a fit must find, never an input to it.
     mp = mp.get("actuator", mp) if isinstance(mp.get("actuator"), dict) else mp
-    overrides = {k: v for k, v in mp.items()
+    overrides: dict[str, Any] = {k: v for k, v in mp.items()
                  if k in known and k not in ("layers", "label") and isinstance(v, (int, float))}
     return replace(base, **overrides) if overrides else base
 
 
 def actuator_with(base: ActuatorParams, values: dict[str, float]) -> ActuatorParams:
-    return replace(base, **{ACTUATOR_FIELDS[k]: float(v) for k, v in values.items()})
+    fields: dict[str, Any] = {ACTUATOR_FIELDS[k]: float(v) for k, v in values.items()}
+    return replace(base, **fields)
 
 
 ACTUATOR_OFFSET_SIGMA_N = 5e-3     # the actuator protocol's contact threshold: the search resolves zero to this
@@ -598,8 +599,9 @@ def combine_specimens(key: str, fits: dict[str, GroupFit], level: float = 0.95) 
         params[name] = ParamEstimate(name, value, ci, p0.unit, status, p0.reference)
     derived: dict[str, dict[str, Any]] = {}
     for name, d0 in first.derived.items():
-        entries = [f.derived.get(name) for f in fits.values()]
-        if not all(isinstance(e, dict) and "value" in e and "ci95" in e for e in entries):
+        entries = [e for e in (f.derived.get(name) for f in fits.values())
+                   if isinstance(e, dict) and "value" in e and "ci95" in e]
+        if len(entries) < len(fits):
             continue
         pop = population([float(e["value"]) for e in entries], [standard_error(e, level) for e in entries], level)
         if pop:
@@ -636,7 +638,8 @@ def combine_specimens(key: str, fits: dict[str, GroupFit], level: float = 0.95) 
 def _mean_model(first: Any, models: list[Any]) -> Any:
     """The population model: the fitted fields averaged over specimens."""
     if isinstance(first, ActuatorParams):
-        return replace(first, **{f: float(np.mean([getattr(m, f) for m in models])) for f in ACTUATOR_FIELDS.values()})
+        means: dict[str, Any] = {f: float(np.mean([getattr(m, f) for m in models])) for f in ACTUATOR_FIELDS.values()}
+        return replace(first, **means)
     if isinstance(first, tuple):
         a = _mean_model(first[0], [m[0] for m in models])
         d = first[1]

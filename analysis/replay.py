@@ -160,7 +160,7 @@ def _contact_moves(reader: Any, events: list[Any], fixture: str) -> list[tuple[f
     n_steps = c.max_travel_m / c.coarse_step_m + 2 * (c.clearance_m + 2 * c.coarse_step_m) / c.fine_step_m
     search_s = n_steps * (FORCE_WINDOW_S + CONTACT_STEP_S)
     search = FindContact(c.threshold_N, c.coarse_step_m, c.fine_step_m, c.max_travel_m, clearance_m=c.clearance_m)
-    out = []
+    out: list[tuple[float, FindContact | Home, float]] = []
     touching = False
     for e in events:
         if e.kind != EventKind.STEP:
@@ -299,7 +299,8 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
             n = int(e.data.get("n_samples", 0))
             if not rate > 0:
                 raise RecordingError(f"{reader.path}: drive_start at {e.time_s:.3f} s has sample_rate_Hz={rate!r}")
-            end = next((x.time_s for x in events[i + 1:] if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
+            end = next((x.time_s for x in events[i + 1:]
+                        if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
             window = np.flatnonzero(~claimed & (t >= e.time_s - 1.0) & (t <= end + 1e-9))
             # the waveform is the run of records on the grid t0 + k / rate that starts nearest before the event
             before = window[t[window] <= e.time_s + 1e-9]
@@ -341,7 +342,8 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
     for i in starts:
         e = events[i]
         rate = float(e.data.get("sample_rate_Hz", 0.0))
-        end = next((x.time_s for x in events[i + 1:] if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
+        end = next((x.time_s for x in events[i + 1:]
+                    if x.kind in (EventKind.DRIVE_END, EventKind.DRIVE_START)), end_of_file)
         sel = (t >= e.time_s - 1e-9) & (t <= end + 1e-9) & np.isfinite(v)
         if sel.sum() < 2 or not rate > 0:
             continue

@@ -180,7 +180,9 @@ class ReplayRequest:
 
 
 def _plan(items: Iterable[Any]) -> Plan:
-    yield from items
+    # a plain loop, not `yield from`: the runner sends each message's reply back, and a list iterator has no send()
+    for item in items:  # noqa: UP028 (see above)
+        yield item
 
 
 def run_replay(req: ReplayRequest) -> RunResult:

@@ -226,6 +226,15 @@ def _data_span(reader: Any, events: list[Any]) -> tuple[float, float]:
     return float(start), float(end)
 
 
+def _monitor_cycles(reader: Any) -> list[Cycle]:
+    """Drive cycles inferred from the recorded drive voltage (a recording without a command stream)."""
+    tm, vm = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
+    ok = np.isfinite(vm)
+    if ok.sum() < 3:
+        return []
+    return infer_cycles(tm[ok], vm[ok], stats=waveform_stats(vm[ok]))
+
+
 def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
     """Read a recording's steps and timelines (`reader`: a RecordingReader)."""
     where = str(reader.path)
@@ -234,12 +243,7 @@ def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
     start_s, end_s = _data_span(reader, events)
     td, vd = _stream(reader, Topic.DRIVE_COMMAND, "voltage_V")
     commanded = td.size > 0
-    monitor_cycles: list[Cycle] = []
-    if not commanded:
-        tm, vm = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
-        ok = np.isfinite(vm)
-        if ok.sum() >= 3:
-            monitor_cycles = infer_cycles(tm[ok], vm[ok], stats=waveform_stats(vm[ok]))
+    monitor_cycles = [] if commanded else _monitor_cycles(reader)
     params = meta.protocol_params
     drive_p = params.get("drive")
     settle = drive_p.get("settle_s") if isinstance(drive_p, dict) else None
