@@ -1,6 +1,9 @@
-"""The published Loadstar client `loadstar-sensors-interface` (Janelia; asyncio + pyserial-asyncio; installed from
-PyPI by the `test` extra) drives the Loadstar emulator through a pseudo-terminal: open (stop a stream, drain, CR ->
-A, units), device info, a reading, tare, and a stream. The client follows Loadstar's DI-100U/DI-1000U page (its
+"""The published Loadstar client `loadstar-sensors-interface` (Janelia; asyncio + pyserial-asyncio; installed
+from
+PyPI by the `test` extra) drives the Loadstar emulator through a pseudo-terminal: open (stop a stream, drain,
+CR ->
+A, units), device info, a reading, tare, and a stream. The client follows Loadstar's DI-100U/DI-1000U page
+(its
 README cites it) and sends lower case.
 
 Where the client is wrong against Loadstar's pages the test asserts its documented behaviour and says so; the
@@ -84,7 +87,8 @@ def test_open_info_read_tare_stream_on_a_di1000(served):
 
 def test_the_client_cannot_open_an_iload(served):
     # The client asks for units ("unit") when it opens; an iLoad has no units command (its readings are always
-    # millipounds) and stays silent, so the open fails. The client targets the DI-1000 family (its README cites that
+    # millipounds) and stays silent, so the open fails. The client targets the DI-1000 family (its README
+    # cites that
     # page): this is the client's limit, not the emulator's.
     module = client_module()
     emulator, path = served(command_set="iload")
@@ -98,7 +102,8 @@ def test_the_client_cannot_open_an_iload(served):
 
 
 def test_the_clients_tare_retry_never_awaits_its_sleep(served, monkeypatch):
-    # A bug in the client: on a bad tare reply it calls asyncio.sleep(...) without await, so it retries at once
+    # A bug in the client: on a bad tare reply it calls asyncio.sleep(...) without await, so it retries at
+    # once
     # (and Python warns that the coroutine was never awaited). Here the sensor stops answering after the open.
     module = client_module()
     emulator, path = served(command_set="di1000")

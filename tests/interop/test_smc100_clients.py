@@ -1,10 +1,15 @@
-"""Published third-party SMC100 clients, installed from PyPI (the `test` extra), drive the SMC100 emulator through a
-pseudo-terminal as they would a real controller: `labdevices` (Krauth; PyVISA-py, synchronous; its SMC100 class is
-the one PyMoDAQ's Newport plugin ships) and `yaqd-newport` (the yaq daemon, asyncio). Neither was written against
+"""Published third-party SMC100 clients, installed from PyPI (the `test` extra), drive the SMC100 emulator
+through a
+pseudo-terminal as they would a real controller: `labdevices` (Krauth; PyVISA-py, synchronous; its SMC100
+class is
+the one PyMoDAQ's Newport plugin ships) and `yaqd-newport` (the yaq daemon, asyncio). Neither was written
+against
 this emulator, so they check it independently of this project's own driver.
 
-Where a client is wrong against the reference the test asserts the client's documented behaviour and says so; the
-emulator is not changed to suit it. Real time (a pty cannot run on a virtual clock): the stage is fast and the reboot
+Where a client is wrong against the reference the test asserts the client's documented behaviour and says so;
+the
+emulator is not changed to suit it. Real time (a pty cannot run on a virtual clock): the stage is fast and
+the reboot
 short so the tests stay in seconds."""
 
 from __future__ import annotations
@@ -41,7 +46,8 @@ def wait_for(condition, timeout_s: float = 5.0, poll_s: float = 0.02) -> None:
         time.sleep(poll_s)
 
 
-# -- labdevices ---------------------------------------------------------------------------------------------------
+# -- labdevices
+# ---------------------------------------------------------------------------------------------------
 @pytest.fixture
 def labdevices_smc100(served):
     newport = pytest.importorskip("labdevices.newport")
@@ -71,8 +77,10 @@ def test_labdevices_identify_home_move_stop(labdevices_smc100):
 
 
 def test_labdevices_position_reads_the_target_not_the_position(labdevices_smc100):
-    # The client's `position` sends PA?, which the reference defines as the TARGET position; the current position
-    # is TP. A client bug against the reference: while moving, `position` already reports where the stage is going.
+    # The client's `position` sends PA?, which the reference defines as the TARGET position; the current
+    # position
+    # is TP. A client bug against the reference: while moving, `position` already reports where the stage is
+    # going.
     client, emulator = labdevices_smc100
     client.home()
     wait_for(lambda: client.error_and_controller_status()[1] == "32")
@@ -88,7 +96,8 @@ def test_labdevices_error_letter_and_text(labdevices_smc100):
     letter = client.get_last_command_error()
     assert letter == "H"
     assert client.get_last_command_error() == "@"  # reading cleared it
-    # The client's own table words the letters as the command pages' error lists do ("Execution not allowed ...");
+    # The client's own table words the letters as the command pages' error lists do ("Execution not allowed
+    # ...");
     # TB answers with the TE page's list ("Command not allowed ..."). Both name the same condition.
     assert client.error_code[letter] == "Execution not allowed in NOT REFERENCED state"
     assert client.query("TB" + letter) == "H Command not allowed in NOT REFERENCED state"
@@ -110,9 +119,11 @@ def test_labdevices_fault_and_disable_enable(labdevices_smc100):
     assert not client.is_moving
 
 
-# -- yaqd-newport -------------------------------------------------------------------------------------------------
+# -- yaqd-newport
+# -------------------------------------------------------------------------------------------------
 def run_yaqd(path: str, tmp_path, scenario) -> None:
-    """Build the yaq daemon in-process (no TCP server: its methods are what the RPC would call) on a fresh event
+    """Build the yaq daemon in-process (no TCP server: its methods are what the RPC would call) on a fresh
+    event
     loop and run `scenario(daemon, emulator)` as a coroutine."""
     motor = pytest.importorskip("yaqd_newport._newport_motor")
     smc100 = pytest.importorskip("yaqd_newport._newport_smc100")
@@ -183,7 +194,8 @@ def test_yaqd_error_letter_fault_and_disable_enable(served, yaq_env, caplog):
         daemon.set_position(30.0)
         await until(lambda: daemon._state["status"] == "MOVING")
         emulator.faults.inject("following_error")
-        # The daemon logs bit 5 (it calls it a motion time-out) and leaves the stage in DISABLE: the position is
+        # The daemon logs bit 5 (it calls it a motion time-out) and leaves the stage in DISABLE: the position
+        # is
         # outside its tolerance of 0, so it does not send MM1.
         await until(lambda: daemon._state["status"] == "DISABLE from MOVING", 5.0)
         await until(lambda: "ERROR CODE: 0020" in caplog.text, 5.0)
