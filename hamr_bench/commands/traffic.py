@@ -24,8 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export = sub.add_parser(
         "export",
         help="write one device's recorded conversation as a byte-exact driver test file",
-        description="Read /traffic/DEVICE of a recording made with --record-traffic and write the driver calls "
-        "it holds, each with its (sent, reply) exchanges, as JSON. tests/drivers/test_recorded_traffic.py "
+        description="Read /traffic/DEVICE of a recording made with --record-traffic and write the driver "
+        "calls it holds, each with its (sent, reply) exchanges, as JSON. tests/drivers/test_recorded_traffic.py "
         "replays every file in tests/drivers/traffic/ against the real driver and the emulator.",
     )
     export.add_argument("recording", type=Path, metavar="RUN.mcap")
