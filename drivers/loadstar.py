@@ -4,52 +4,26 @@ serial port (9600 8N1 default, command + CR, replies end CR LF).
 Implements `hamr_bench.interfaces.ForceSensor` in newtons: identify (MODEL and serial number), units,
 capacity, tare, single reading, streaming with a clean stop. Opening the port stops and drains a sensor an
 earlier program left streaming (CR, read until quiet, CR -> `A`). Readings are converted from the sensor's
-unit (lb, kg, g, N; millipounds on iLoad). A reading beyond the capacity is a DeviceFault (overload); the
-runner checks force limits of its own too. The two interfaces' command names are data (`COMMAND_SETS`)."""
+unit (lb, kg, g, N, kN, oz; millipounds on iLoad). A reading beyond the capacity is a DeviceFault (overload);
+the
+runner checks force limits of its own too. What each interface family accepts and answers is Loadstar's
+published
+command pages, as tables in `hamr_bench.instruments.loadstar_reference`."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import serial
 
 from drivers.serial_line import PortOpener, SerialLine
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceProtocolError, DeviceTimeout
+from hamr_bench.instruments.loadstar_reference import FAMILIES, NEWTONS_PER_UNIT
 from hamr_bench.interfaces import ForceSample
 
-NEWTONS_PER_UNIT: dict[str, float] = {
-    "LB": 4.4482216152605,  # pound-force, exact by definition
-    "MLB": 4.4482216152605e-3,
-    "KG": 9.80665,  # kilogram-force
-    "G": 9.80665e-3,
-    "N": 1.0,
-}
+__all__ = ["COMMAND_SETS", "NEWTONS_PER_UNIT", "LoadstarSensor"]
 
-
-@dataclass(frozen=True)
-class LoadstarCommands:
-    """The command texts of one interface. `units=None`: the interface has no UNITS query and reads in
-    `reading_unit`; `capacity_unit=None`: capacity is in the unit UNITS reports."""
-
-    name: str
-    model: str
-    identify: str
-    units: str | None
-    capacity: str
-    tare: str
-    read: str
-    stream: str
-    reading_unit: str | None
-    capacity_unit: str | None
-
-
-# UNVERIFIED against RSP2 firmware: from the Loadstar DI-100U/DI-1000U and iLoad command lists.
-COMMAND_SETS: dict[str, LoadstarCommands] = {
-    "di1000": LoadstarCommands("di1000", "MODEL", "SS1", "UNITS", "SLC", "CT0", "W", "WC", None, None),
-    "iload": LoadstarCommands("iload", "MODEL", "ID", None, "LC", "TARE", "O0W1", "O0W0", "MLB", "LB"),
-}
+COMMAND_SETS = FAMILIES  # the interface families a rig file's `command_set` may name
 
 
 class LoadstarSensor:
@@ -74,7 +48,7 @@ class LoadstarSensor:
             raise ValueError(f"{device}: command_set {command_set!r} not one of {sorted(COMMAND_SETS)}")
         self.clock = clock
         self.device = device
-        self.commands = COMMAND_SETS[command_set]
+        self.family = FAMILIES[command_set]
         self.timeout_s = float(timeout_s)
         self.tare_timeout_s = float(tare_timeout_s)
         self.drain_quiet_s = float(drain_quiet_s)
@@ -98,11 +72,11 @@ class LoadstarSensor:
         )
         try:
             self._stop_and_drain()
-            self.reading_unit = self.commands.reading_unit or self.units()
+            self.reading_unit = self.family.reading_unit or self.units()
             self._newtons_per_reading_unit = self._unit_factor(self.reading_unit)
             if capacity_N is None:
-                capacity_unit = self.commands.capacity_unit or self.reading_unit
-                capacity = self._number(self._line.query(self.commands.capacity), "capacity")
+                capacity_unit = self.family.capacity_unit or self.reading_unit
+                capacity = self._number(self._line.query(self._command("capacity")), "capacity")
                 capacity_N = capacity * self._unit_factor(capacity_unit)
         except Exception:
             self._line.close()
@@ -112,6 +86,13 @@ class LoadstarSensor:
         self._capacity_N = float(capacity_N)
 
     # -- helpers -------------------------------------------------------------------------------------------
+    def _command(self, role: str) -> str:
+        command = self.family.command(role)
+        if command is None:
+            message = f"{self.device}: {self.family.title} has no {role} command"
+            raise DeviceProtocolError(message, self.device)
+        return command
+
     def _unit_factor(self, unit: str) -> float:
         factor = NEWTONS_PER_UNIT.get(unit.strip().upper())
         if factor is None:
@@ -148,13 +129,13 @@ class LoadstarSensor:
 
     # -- identity ------------------------------------------------------------------------------------------
     def identify(self) -> tuple[str, str]:
-        """(model, serial number)."""
-        return self._line.query(self.commands.model), self._line.query(self.commands.identify)
+        """(model, identifier): MODEL and ID on a DI-1000, SS0 and SS1 on an iLoad."""
+        return self._line.query(self._command("model")), self._line.query(self._command("identify"))
 
     def units(self) -> str:
-        if self.commands.units is None:
-            return self.commands.reading_unit or "MLB"
-        return self._line.query(self.commands.units).upper()
+        if self.family.command("units") is None:
+            return self.family.reading_unit or "MLB"
+        return self._line.query(self._command("units")).upper()
 
     # -- ForceSensor surface -------------------------------------------------------------------------------
     @property
@@ -162,28 +143,32 @@ class LoadstarSensor:
         return self._capacity_N
 
     def tare(self) -> None:
-        # One reading first: a sensor already saturated would be zeroed at its saturation level by the tare and
+        # One reading first: a sensor already saturated would be zeroed at its saturation level by the tare
+        # and
         # then read 0 whatever pushed on it (a contact search would drive the leg into it blind). The reading
         # raises DeviceFault (overload) beyond capacity, as the Nano17 driver does on its tare.
         self.read_N()
-        reply = self._line.query(self.commands.tare, timeout_s=self.tare_timeout_s)
-        if reply.upper() != "TARED":
-            message = f"{self.device}: expected 'Tared' after {self.commands.tare}, got {reply!r}"
+        command = self._command("tare")
+        reply = self._line.query(command, timeout_s=self.tare_timeout_s)
+        if reply.upper() not in {expected.upper() for expected in self.family.tare_replies}:
+            expected = " or ".join(repr(text) for text in self.family.tare_replies)
+            message = f"{self.device}: expected {expected} after {command}, got {reply!r}"
             raise DeviceProtocolError(message, self.device)
 
     def read_N(self) -> float:
-        reply = self._line.query(self.commands.read)
+        reply = self._line.query(self._command("read"))
         return self._to_N(reply, self.clock.now_s())
 
     def start_stream(self) -> None:
-        self._line.write_line(self.commands.stream)
+        self._line.write_line(self._command("stream"))
         self._streaming = True
         self._last_stream_data_s = self.clock.now_s()
 
     def read_stream(self) -> list[ForceSample]:
         """Samples received since the last call. They arrive without timestamps; the last one of a batch is
         stamped with its arrival time and earlier ones are spaced back at the stream period or the time a line
-        takes on the wire at the baud rate, whichever is longer (never before the previous batch). DeviceTimeout when no line has come for the timeout."""
+        takes on the wire at the baud rate, whichever is longer (never before the previous batch).
+        DeviceTimeout when no line has come for the timeout."""
         if not self._streaming:
             return []
         lines = self._line.read_available_lines("stream")

@@ -3,7 +3,9 @@
 Implements `hamr_bench.interfaces.Stage` in metres (the controller speaks mm) plus the controller's own
 surface: status with every state code and error bit decoded (tables in `smc100_codes`), TE error read-back
 after every command that can be rejected, stop, reset, enable/disable (MM), velocity and acceleration (VA/AC),
-soft limits (SL/SR), motion-time query (PT). Lessons from public drivers are rules here: a motion command
+soft limits (SL/SR), motion-time query (PT), identity (VE, ID?). The command set, states and letters are the
+reference's tables in `hamr_bench.instruments.smc100_reference`. Lessons from public drivers are rules here:
+a motion command
 (OR/PA/PR) is sent once and never retried; completion is "any READY code" (32-35), never "saw MOVING then
 READY", so a move to the current position completes at once; TS is polled through the clock; a move that does
 not finish in time is stopped and reported as DeviceTimeout. Moves outside the soft limits are refused before
@@ -74,7 +76,8 @@ class NewportSMC100:
             port_opener=port_opener,
         )
         if limits_m is None:
-            # Read now, not lazily in the property: `isinstance(x, Stage)` evaluates properties on Python 3.11.
+            # Read now, not lazily in the property: `isinstance(x, Stage)` evaluates properties on Python
+            # 3.11.
             try:
                 self._controller_limits_m = self.soft_limits_m()
             except Exception:
@@ -136,7 +139,8 @@ class NewportSMC100:
             raise DeviceProtocolError(f"{self.device}: bad TS reply {value!r}: {exc}", self.device) from exc
 
     def is_moving(self) -> bool:
-        """True while MOVING, HOMING or JOGGING, False when READY. Any other state (DISABLE, NOT REFERENCED after a
+        """True while MOVING, HOMING or JOGGING, False when READY. Any other state (DISABLE, NOT REFERENCED
+        after a
         tripped switch, ...) or an error bit is a DeviceFault: the carriage no longer holds its position, so a
         caller checking on it between moves must not take it for "still"."""
         status = self.status()
@@ -213,8 +217,17 @@ class NewportSMC100:
         self._wait_ready(f"move by {displacement_m:.6g} m", self._motion_timeout(timeout_s))
 
     def stop(self) -> None:
-        """ST to this controller only (ST without an address would stop the whole chain)."""
+        """ST to this controller only (ST without an address would stop the whole chain), then TE. ST is
+        refused in
+        NOT REFERENCED and CONFIGURATION (H, I): nothing moves then, but the letter must be read here, or the
+        next
+        checked command would find it and report a rejection of its own."""
         self._send("ST")
+        self.error_letter()
+
+    def identify(self) -> tuple[str, str]:
+        """(controller revision as `VE` gives it, stage identifier as `ID?` gives it)."""
+        return self._query("VE"), self._query("ID", "?")
 
     def reset(self) -> None:
         """RS, then poll TS (the rebooting controller ignores it for a while) until NOT REFERENCED."""

@@ -16,7 +16,7 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, cast, runtime_checkable
@@ -30,6 +30,7 @@ ENTRY_POINT_GROUP = "hamr_bench.backends"
 DRIVERS = "drivers"
 SIMULATED_BENCH = "simulated-bench"
 RECORDED_TRAFFIC = "recorded-traffic"
+TRAFFIC_TEST_EXPORT = "traffic-test-export"
 
 # (topic /traffic/<device>, rig-clock time, direction "tx"/"rx", bytes): where a serial port's traffic goes.
 TrafficSink = Callable[[str, float, str, bytes], None]
@@ -124,6 +125,12 @@ class TrafficServer(Protocol):
     def close_served(self, url: str) -> None: ...
 
 
+class TrafficTestExport(Protocol):
+    """Writes one device's recorded conversation as a byte-exact driver test file; returns the number of calls."""
+
+    def __call__(self, items: Sequence[Any], driver: str, device: str, source: str, out: Path) -> int: ...
+
+
 _registered: dict[str, object] = {}
 
 
@@ -193,3 +200,10 @@ def traffic_server(name: str = RECORDED_TRAFFIC) -> TrafficServer:
     if not isinstance(server, TrafficServer):
         raise ConfigError(f"backend {name!r} does not serve recorded traffic")
     return server
+
+
+def traffic_test_export(name: str = TRAFFIC_TEST_EXPORT) -> TrafficTestExport:
+    export = load_backend(name)
+    if not callable(export):
+        raise ConfigError(f"backend {name!r} does not export driver tests")
+    return cast(TrafficTestExport, export)

@@ -22,6 +22,7 @@ COMMAND_MODULES = [
     "model",
     "paper",
     "sim",
+    "traffic",
     "import_cmd",
     "fit",
     "report",

@@ -1,12 +1,13 @@
 """A Loadstar Sensors load cell with its DI-1000 or iLoad interface, at the byte level: the sensor model (true
 force from a callback -> drift -> tare -> noise from the resolution -> ADC saturation -> quantisation to the
-resolution) and the command set (CR -> `A`, identity, units, capacity, tare -> `Tared`, single reading,
-streaming at the interface's rate until a CR arrives).
+resolution) and the interface's command set as Loadstar publishes it
+(`hamr_bench.instruments.loadstar_reference`:
+every spelling a family accepts, case-insensitive; CR -> `A`, identity, units, capacity, tare -> `Tared` on a
+DI-1000 and `A` on an iLoad, single reading, streaming at the interface's rate until a CR arrives).
 
 The bench passes `force_source(time_s) -> force_N` (the true contact force) and a numpy Generator, so readings
 are reproducible under one seed. Streamed lines are produced lazily at the stream rate, each computed at the
-moment it is produced. Command names per interface are data (UNVERIFIED against RSP2 firmware; see
-docs/hardware.md)."""
+moment it is produced. Which family the paper's RSP2 sensor speaks is UNVERIFIED (docs/hardware.md)."""
 
 from __future__ import annotations
 
@@ -17,38 +18,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from hamr_bench.clock import Clock
+from hamr_bench.instruments.loadstar_reference import FAMILIES, NEWTONS_PER_UNIT, OPTIONAL_SPELLINGS
 from sim_devices.faults import FORCE_SENSOR_FAULTS, SERIAL_FAULTS, FaultInjector
 from sim_devices.serial_link import LineEndpoint
-
-# Newtons per unit the sensor can report in (exact definitions of the pound-force and kilogram-force).
-NEWTONS_PER_UNIT: dict[str, float] = {
-    "LB": 4.4482216152605,
-    "MLB": 4.4482216152605e-3,
-    "KG": 9.80665,
-    "G": 9.80665e-3,
-    "N": 1.0,
-}
-
-# role -> command text, per interface. `reading_unit`/`capacity_unit` None: the unit UNITS reports.
-COMMAND_SETS: dict[str, dict[str, str | None]] = {
-    "di1000": {
-        "model": "MODEL", "identify": "SS1", "units": "UNITS", "capacity": "SLC", "tare": "CT0",
-        "read": "W", "stream": "WC", "reading_unit": None, "capacity_unit": None,
-    },
-    "iload": {
-        "model": "MODEL", "identify": "ID", "units": None, "capacity": "LC", "tare": "TARE",
-        "read": "O0W1", "stream": "O0W0", "reading_unit": "MLB", "capacity_unit": "LB",
-    },
-}
-
 
 @dataclass(frozen=True)
 class LoadstarParams:
     """Sensor and interface settings (defaults: a 10 lb sensor on a DI-1000U; UNVERIFIED for the RSP2)."""
 
     command_set: str = "di1000"
-    model: str = "DI-1000U"
+    # what MODEL (DI-1000) or SS0 (iLoad) answers; None: the family's published reply
+    model: str | None = None
     serial_number: str = "LS-HAMRSIM-0001"
+    # Spellings this firmware does not accept (Loadstar: W "is not supported in all firmware versions" of
+    # iLoad).
+    refused_spellings: tuple[str, ...] = ()
     units: str = "LB"  # what UNITS reports and W/WC readings are in (iLoad readings are always millipounds)
     capacity: float = 10.0  # in `units` (in lb on iLoad)
     resolution: float = 0.001  # one count, in `units`
@@ -62,8 +46,13 @@ class LoadstarParams:
     drift_strength: float = 0.0  # N/s (linear) or N/sqrt(s) (random walk)
 
     def __post_init__(self) -> None:
-        if self.command_set not in COMMAND_SETS:
-            raise ValueError(f"command_set {self.command_set!r} not in {sorted(COMMAND_SETS)}")
+        if self.command_set not in FAMILIES:
+            raise ValueError(f"command_set {self.command_set!r} not in {sorted(FAMILIES)}")
+        optional = OPTIONAL_SPELLINGS.get(self.command_set, ())
+        if any(spelling not in optional for spelling in self.refused_spellings):
+            lacking = ", ".join(optional) or "nothing"
+            message = f"refused_spellings {self.refused_spellings}: a {self.command_set} firmware lacks {lacking}"
+            raise ValueError(message)
         if self.units.upper() not in NEWTONS_PER_UNIT:
             raise ValueError(f"units {self.units!r} not in {sorted(NEWTONS_PER_UNIT)}")
         if self.drift not in ("none", "linear", "random_walk"):
@@ -96,12 +85,15 @@ class LoadstarEmulator(LineEndpoint):
             rng=rng,
         )
         self.force_source = force_source
-        self.commands = COMMAND_SETS[p.command_set]
+        self.family = FAMILIES[p.command_set]
         self._by_text = {
-            text: role for role, text in self.commands.items() if text and not role.endswith("_unit")
+            spelling: role
+            for role, entry in self.family.roles.items()
+            for spelling in entry.spellings
+            if spelling not in p.refused_spellings
         }
-        self.reading_unit = (self.commands["reading_unit"] or p.units).upper()
-        capacity_unit = (self.commands["capacity_unit"] or p.units).upper()
+        self.reading_unit = (self.family.reading_unit or p.units).upper()
+        capacity_unit = (self.family.capacity_unit or p.units).upper()
         self.capacity_N = p.capacity * NEWTONS_PER_UNIT[capacity_unit]
         unit_ratio = NEWTONS_PER_UNIT[p.units.upper()] / NEWTONS_PER_UNIT[self.reading_unit]
         self.resolution = p.resolution * unit_ratio
@@ -157,12 +149,12 @@ class LoadstarEmulator(LineEndpoint):
         if self.streaming:
             self.streaming = False  # a CR (with anything before it) stops the stream; no reply
             return
-        role = self._by_text.get(line.strip().upper(), "ready" if not line.strip() else None)
+        role = self._by_text.get(line.strip().upper())
         p = self.params
         if role == "ready":
             self.send("A", time_s)
         elif role == "model":
-            self.send(p.model, time_s)
+            self.send(p.model or self.family.model_reply, time_s)
         elif role == "identify":
             self.send(p.serial_number, time_s)
         elif role == "units":
@@ -171,10 +163,11 @@ class LoadstarEmulator(LineEndpoint):
             self.send(f"{p.capacity:.3f}", time_s)
         elif role == "tare":
             self.tare_N = self._loaded_N(time_s)
-            self.send("Tared", time_s, extra_delay_s=p.tare_time_s)
+            self.send(self.family.tare_replies[0], time_s, extra_delay_s=p.tare_time_s)
         elif role == "read":
             self.send(self._format(self.reading(time_s)), time_s)
         elif role == "stream":
             self.streaming = True
             self._next_sample_s = time_s + p.reply_latency_s
-        # anything else: the interface ignores it (UNVERIFIED: real firmware may answer with an error text)
+        # anything else: silent (UNVERIFIED: what real firmware answers to an unknown command is not
+        # published)

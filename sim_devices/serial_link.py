@@ -42,6 +42,7 @@ class LineEndpoint:
         reply_latency_s: float,
         input_terminator: bytes,
         output_terminator: bytes = b"\r\n",
+        keep_stray_line_ends: bool = False,
         rng: np.random.Generator | None = None,
     ) -> None:
         self.clock = clock
@@ -52,6 +53,10 @@ class LineEndpoint:
         self.byte_time_s = 10.0 / float(baudrate)
         self.input_terminator = input_terminator
         self.output_terminator = output_terminator
+        # False: a CR or LF inside a line is dropped; True: the line is handed over byte for byte (a device
+        # that
+        # only executes on its full terminator sees a stray CR or LF as part of the command).
+        self.keep_stray_line_ends = keep_stray_line_ends
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.lock = threading.RLock()
         self._inbuf = bytearray()
@@ -83,7 +88,9 @@ class LineEndpoint:
             while (index := self._inbuf.find(self.input_terminator)) >= 0:
                 raw = bytes(self._inbuf[:index])
                 del self._inbuf[: index + len(self.input_terminator)]
-                text = raw.replace(b"\r", b"").replace(b"\n", b"").decode("latin-1")
+                if not self.keep_stray_line_ends:
+                    raw = raw.replace(b"\r", b"").replace(b"\n", b"")
+                text = raw.decode("latin-1")
                 self.handle_line(text, time_s)
 
     def send(

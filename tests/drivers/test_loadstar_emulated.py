@@ -64,7 +64,9 @@ def transport(request):
 def test_identify_read_tare(transport, command_set):
     load = Load(2.0)
     sensor, emulator, clock = transport(LoadstarParams(command_set=command_set), load)
-    assert sensor.identify() == ("DI-1000U", "LS-HAMRSIM-0001")
+    # MODEL / SS0 as the emulator answers them
+    model = {"di1000": "FCM DI-1000", "iload": "ILOAD"}[command_set]
+    assert sensor.identify() == (model, "LS-HAMRSIM-0001")
     assert sensor.capacity_N == pytest.approx(10 * LBF_N)
     assert sensor.read_N() == pytest.approx(2.0, abs=5 * RESOLUTION_N)
     sensor.tare()

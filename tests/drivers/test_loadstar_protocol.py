@@ -12,8 +12,8 @@ from hamr_bench.errors import DeviceFault, DeviceProtocolError, DeviceTimeout
 LBF_N = 4.4482216152605
 KGF_N = 9.80665
 READY = [(b"\r", b"A\r\n"), (b"\r", b"A\r\n")]  # CR (stops any stream, drained), CR -> A
-OPEN_DI1000 = READY + [(b"UNITS\r", b"LB\r\n"), (b"SLC\r", b"10.000\r\n")]
-OPEN_ILOAD = READY + [(b"LC\r", b"10.000\r\n")]
+OPEN_DI1000 = READY + [(b"UNITS\r", b"LB\r\n"), (b"LC\r", b"10.000\r\n")]  # DI-100U/DI-1000U page
+OPEN_ILOAD = READY + [(b"SLC\r", b"10.000\r\n")]  # iLoad page: capacity in lb, readings in millipounds
 
 
 def test_port_settings_9600_8n1_no_flow_control():
@@ -34,7 +34,7 @@ def test_open_drains_a_sensor_left_streaming():
         (b"\r", b"14\r\n0.515\r\n"),  # the stream ends with the CR; a line was still in flight
         (b"\r", b"A\r\n"),
         (b"UNITS\r", b"LB\r\n"),
-        (b"SLC\r", b"10.000\r\n"),
+        (b"LC\r", b"10.000\r\n"),
     ]
     with expected_protocol(LoadstarSensor, script) as sensor:
         assert sensor.capacity_N == pytest.approx(10 * LBF_N)
@@ -47,9 +47,9 @@ def test_open_without_ready_answer_is_a_protocol_error():
 
 
 def test_identify():
-    script = OPEN_DI1000 + [(b"MODEL\r", b"DI-1000U\r\n"), (b"SS1\r", b"123456\r\n")]
+    script = OPEN_DI1000 + [(b"MODEL\r", b"FCM DI-1000\r\n"), (b"ID\r", b"W1234-5678\r\n")]
     with expected_protocol(LoadstarSensor, script) as sensor:
-        assert sensor.identify() == ("DI-1000U", "123456")
+        assert sensor.identify() == ("FCM DI-1000", "W1234-5678")
 
 
 def test_single_reading_in_pounds():
@@ -58,14 +58,14 @@ def test_single_reading_in_pounds():
 
 
 def test_single_reading_in_kilograms():
-    script = READY + [(b"UNITS\r", b"KG\r\n"), (b"SLC\r", b"5.000\r\n"), (b"W\r", b"-0.2\r\n")]
+    script = READY + [(b"UNITS\r", b"KG\r\n"), (b"LC\r", b"5.000\r\n"), (b"W\r", b"-0.2\r\n")]
     with expected_protocol(LoadstarSensor, script) as sensor:
         assert sensor.capacity_N == pytest.approx(5 * KGF_N)
         assert sensor.read_N() == pytest.approx(-0.2 * KGF_N)
 
 
 def test_single_reading_in_newtons():
-    script = READY + [(b"UNITS\r", b"N\r\n"), (b"SLC\r", b"50\r\n"), (b"W\r", b"3.5\r\n")]
+    script = READY + [(b"UNITS\r", b"N\r\n"), (b"LC\r", b"50\r\n"), (b"W\r", b"3.5\r\n")]
     with expected_protocol(LoadstarSensor, script) as sensor:
         assert sensor.read_N() == pytest.approx(3.5)
 
@@ -78,7 +78,7 @@ def test_unknown_unit_is_a_protocol_error():
 
 
 def test_iload_reads_millipounds_and_capacity_in_pounds():
-    script = OPEN_ILOAD + [(b"O0W1\r", b"2500\r\n"), (b"MODEL\r", b"iLoad Pro\r\n"), (b"ID\r", b"A1B2\r\n")]
+    script = OPEN_ILOAD + [(b"O0W1\r", b"2500\r\n"), (b"SS0\r", b"iLoad Pro\r\n"), (b"SS1\r", b"A1B2\r\n")]
     with expected_protocol(LoadstarSensor, script, command_set="iload") as sensor:
         assert sensor.capacity_N == pytest.approx(10 * LBF_N)
         assert sensor.read_N() == pytest.approx(2.5 * LBF_N)
@@ -90,7 +90,7 @@ def test_tare_both_command_sets():
     script = OPEN_DI1000 + [(b"W\r", b"0.012\r\n"), (b"CT0\r", b"Tared\r\n")]
     with expected_protocol(LoadstarSensor, script) as sensor:
         sensor.tare()
-    script = OPEN_ILOAD + [(b"O0W1\r", b"12\r\n"), (b"TARE\r", b"Tared\r\n")]
+    script = OPEN_ILOAD + [(b"O0W1\r", b"12\r\n"), (b"CT0\r", b"A\r\n")]  # an iLoad acknowledges with A
     with expected_protocol(LoadstarSensor, script, command_set="iload") as sensor:
         sensor.tare()
 
@@ -102,7 +102,7 @@ def test_tare_of_a_saturated_sensor_is_an_overload_fault_and_sends_no_tare():
 
 
 def test_tare_with_a_wrong_answer_is_a_protocol_error():
-    script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"CT0\r", b"A\r\n")]
+    script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"CT0\r", b"0.000\r\n")]
     with expected_protocol(LoadstarSensor, script) as sensor:
         with pytest.raises(DeviceProtocolError, match="Tared"):
             sensor.tare()

@@ -82,6 +82,7 @@ def test_move_to_current_position_returns_at_once(rig):
 
 def test_settings_round_trip(rig):
     stage, emulator, clock = rig
+    stage.home()  # VA, AC, SL, SR are set in CONFIGURATION, DISABLE or READY, not NOT REFERENCED (H)
     stage.set_velocity(4e-3)
     assert stage.velocity_m_per_s() == pytest.approx(4e-3)
     stage.set_acceleration(50e-3)

@@ -196,7 +196,7 @@ def test_a_motion_command_is_never_retried_when_te_goes_unanswered():
 
 
 def test_motion_timeout_stops_the_stage_then_raises():
-    script = [(b"1PA1\r\n", None), OK] + [(b"1TS\r\n", b"1TS000028\r\n")] * 4 + [(b"1ST\r\n", None)]
+    script = [(b"1PA1\r\n", None), OK] + [(b"1TS\r\n", b"1TS000028\r\n")] * 4 + [(b"1ST\r\n", None), OK]
     with smc100(script, poll_interval_s=0.05) as stage:
         with pytest.raises(DeviceTimeout, match="not finished within 0.12 s.*stopped"):
             stage.move_to(1e-3, timeout_s=0.12)
@@ -216,9 +216,26 @@ def test_end_of_run_during_a_move_is_a_fault():
             stage.move_to(1e-3)
 
 
-def test_stop_addresses_only_this_controller():
-    with smc100([(b"1ST\r\n", None)]) as stage:
+def test_stop_addresses_only_this_controller_and_reads_te():
+    with smc100([(b"1ST\r\n", None), OK]) as stage:
         stage.stop()
+
+
+def test_stop_refused_in_not_referenced_leaves_no_letter_for_the_next_command():
+    # ST is not executed in NOT REFERENCED (H): stop() reads that letter, so the OR that follows reads its own TE.
+    script = [(b"1ST\r\n", None), (b"1TE\r\n", b"1TEH\r\n"),
+              (b"1TS\r\n", b"1TS00000A\r\n"), (b"1OR\r\n", None), OK, (b"1TS\r\n", b"1TS000032\r\n")]
+    with smc100(script) as stage:
+        stage.stop()
+        stage.home()
+
+
+def test_identify_reads_ve_and_id():
+    script = [(b"1VE\r\n", b"1VE SMC_CC - Controller-driver version  3. 1. 2\r\n"),
+              (b"1ID?\r\n", b"1IDLTA-HS_PN:B0601246985103_UD:062509\r\n")]
+    with smc100(script) as stage:
+        assert stage.identify() == ("SMC_CC - Controller-driver version  3. 1. 2",
+                                    "LTA-HS_PN:B0601246985103_UD:062509")
 
 
 def test_is_moving_reads_ts():
@@ -274,7 +291,7 @@ def test_velocity_and_acceleration_read_and_set_in_mm():
 
 def test_velocity_out_of_range_reports_letter_c():
     with smc100([(b"1VA50\r\n", None), (b"1TE\r\n", b"1TEC\r\n")]) as stage:
-        with pytest.raises(DeviceFault, match="C \\(parameter missing or out of range\\)"):
+        with pytest.raises(DeviceFault, match="C \\(Parameter missing or out of range\\)"):
             stage.set_velocity(50e-3)
 
 

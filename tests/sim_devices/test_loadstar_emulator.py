@@ -77,16 +77,16 @@ def test_random_walk_drift_grows_like_sqrt_time():
 def test_ready_and_identity_commands():
     emu, clock = make()
     assert ask(emu, clock, b"\r") == b"A\r\n"
-    assert ask(emu, clock, b"MODEL\r") == b"DI-1000U\r\n"
-    assert ask(emu, clock, b"SS1\r") == b"LS-HAMRSIM-0001\r\n"
+    assert ask(emu, clock, b"MODEL\r") == b"FCM DI-1000\r\n"  # the DI-100U/DI-1000U page
+    assert ask(emu, clock, b"ID\r") == b"LS-HAMRSIM-0001\r\n"
     assert ask(emu, clock, b"UNITS\r") == b"LB\r\n"
-    assert ask(emu, clock, b"SLC\r") == b"10.000\r\n"
+    assert ask(emu, clock, b"LC\r") == b"10.000\r\n"
 
 
 def test_iload_reads_in_millipounds():
     emu, clock = make(force=lambda t: 0.25 * LBF_N, noise_counts=0.0, command_set="iload")
     assert ask(emu, clock, b"O0W1\r") == b"250\r\n"
-    assert ask(emu, clock, b"LC\r") == b"10.000\r\n"
+    assert ask(emu, clock, b"SLC\r") == b"10.000\r\n"
 
 
 def test_stream_rate_and_lines_computed_when_produced():
@@ -121,3 +121,44 @@ def test_cr_stops_the_stream_and_nothing_more_is_produced():
     emu.output_until(clock.now_s() + 1.0)
     assert emu.next_output_s() is None
     assert not emu.streaming
+
+
+# Each family's spellings as Loadstar's pages give them, and that the other family's do not work on it.
+DI1000_SPELLINGS = [b"MODEL", b"ID", b"UNITS", b"UNIT", b"LC", b"CT0", b"TARE", b"W"]
+ILOAD_SPELLINGS = [b"SS0", b"SS1", b"SLC", b"CT0", b"O0W1", b"W"]
+
+
+@pytest.mark.parametrize("command", DI1000_SPELLINGS)
+def test_di1000_answers_its_commands_in_any_case(command):
+    emu, clock = make(noise_counts=0.0)
+    assert ask(emu, clock, command + b"\r", wait_s=1.0).endswith(b"\r\n")
+    assert ask(emu, clock, command.lower() + b"\r", wait_s=1.0).endswith(b"\r\n")
+
+
+@pytest.mark.parametrize("command", ILOAD_SPELLINGS)
+def test_iload_answers_its_commands(command):
+    emu, clock = make(noise_counts=0.0, command_set="iload")
+    assert ask(emu, clock, command + b"\r", wait_s=1.0).endswith(b"\r\n")
+
+
+FOREIGN = [("di1000", b"SLC"), ("di1000", b"SS1"), ("di1000", b"O0W1"), ("iload", b"LC"), ("iload", b"ID"),
+           ("iload", b"UNITS"), ("iload", b"TARE"), ("iload", b"MODEL")]
+
+
+@pytest.mark.parametrize(("command_set", "foreign"), FOREIGN)
+def test_the_other_familys_commands_get_no_answer(command_set, foreign):
+    emu, clock = make(command_set=command_set)
+    assert ask(emu, clock, foreign + b"\r", wait_s=1.0) == b""
+
+
+def test_tare_replies_per_family():
+    emu, clock = make()
+    assert ask(emu, clock, b"TARE\r", wait_s=1.0) == b"Tared\r\n"
+    emu, clock = make(command_set="iload")
+    assert ask(emu, clock, b"CT0\r", wait_s=1.0) == b"A\r\n"  # "wait for the 'A' for acknowledgment"
+
+
+def test_an_iload_firmware_without_w():
+    emu, clock = make(command_set="iload", refused_spellings=("W",), noise_counts=0.0)
+    assert ask(emu, clock, b"W\r") == b""
+    assert ask(emu, clock, b"O0W1\r") == b"0\r\n"

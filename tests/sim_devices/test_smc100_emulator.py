@@ -100,12 +100,13 @@ def test_rejections_store_the_manuals_letters():
     assert emu.take_error_letter() == "@"  # reading clears it
     emu.home(0.0)
     assert emu.home(0.01) == "E"  # home already started
-    assert emu.move_absolute(0.01, 1e-3) == "L"  # HOMING
+    # PA's error list has no L or M: a move refused while homing or moving stores D ("Command not allowed")
+    assert emu.move_absolute(0.01, 1e-3) == "D"  # HOMING
     emu.update(10.0)
     assert emu.move_absolute(10.0, 0.06) == "G"  # beyond SR = 50 mm
     assert emu.home(10.0) == "K"  # READY
     emu.move_absolute(10.0, 10e-3)
-    assert emu.move_absolute(10.1, 0.0) == "M"  # MOVING
+    assert emu.move_absolute(10.1, 0.0) == "D"  # MOVING
     assert emu.set_velocity(10.1, 1e-3) == "M"
     emu.update(20.0)
     assert emu.set_velocity(20.0, 0.02) == "C"  # above the PP maximum
@@ -162,7 +163,9 @@ def test_end_of_run_sets_the_direction_bit():
     emu.move_absolute(100.0, -10e-3)
     emu.faults.inject("end_of_run", at_s=100.5)
     state, bits = emu.status(101.0)
-    assert state == 0x10 and bits == 1 << 0  # negative end of run
+    # state diagram: an end of run in MOVING aborts the motion -> NOT REFERENCED from MOVING (0F), not 10 (ESP
+    # stage error)
+    assert state == 0x0F and bits == 1 << 0  # negative end of run
     assert emu.home(101.0) is None  # NOT REFERENCED again: can be homed
 
 
@@ -199,6 +202,11 @@ def test_protocol_queries_echo_and_accept_lower_case_and_question_mark():
     assert talk(proto, clock, b"1TS\r\n") == b"1TS00000A\r\n"
     assert talk(proto, clock, b"1tp?\r\n") == b"1TP0\r\n"
     assert talk(proto, clock, b"1VA?\r\n") == b"1VA5\r\n"
+    # PT is executed in DISABLE, READY and motion only: in NOT REFERENCED it stores H
+    assert talk(proto, clock, b"1PT10\r\n") == b""
+    assert talk(proto, clock, b"1TE\r\n") == b"1TEH\r\n"
+    proto.emulator.home(clock.now_s())
+    clock.sleep(1.0)
     assert talk(proto, clock, b"1PT10\r\n") == b"1PT2.25\r\n"
 
 
