@@ -83,10 +83,11 @@ def _gather_in_order(futures: list, progress: Callable[[int, int], None] | None)
     while pending:
         done, pending = wait(pending, return_when=FIRST_EXCEPTION)
         for future in done:
-            if future.exception() is not None:
+            error = future.exception()
+            if error is not None:
                 for other in pending:
                     other.cancel()
-                raise future.exception()
+                raise error
             done_count += 1
             if progress:
                 progress(done_count, len(futures))

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.daq import DaqBackend
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault
-from hamr_bench.interfaces import ForceSample
+from hamr_bench.interfaces import DaqBackend, ForceSample
+from hamr_bench.rig_file import NANO17_SAMPLE_RATE_HZ
 
 AXES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 _FORCE_TO_N = {"N": 1.0, "lbf": 4.4482216152605, "kgf": 9.80665}
@@ -105,7 +105,7 @@ class AtiNano17:
         gauge_channels: Sequence[str],
         axis: str = "Fz",
         sign: float = 1.0,
-        sample_rate_Hz: float = 5_000.0,
+        sample_rate_Hz: float = NANO17_SAMPLE_RATE_HZ,
         samples_per_reading: int = 50,
         tare_samples: int = 500,
         gauge_range_V: float = 10.0,

@@ -1,5 +1,5 @@
 """The real DAQ backend: National Instruments DAQmx through the `nidaqmx` package (optional extra
-`pip install hamr-bench[nidaq]`; needs NI-DAQmx installed). Implements the `drivers.daq.DaqBackend` surface.
+`pip install hamr-bench[nidaq]`; needs NI-DAQmx installed). Implements the `hamr_bench.interfaces.DaqBackend` surface.
 
 Importing this module never needs `nidaqmx`; constructing `NidaqmxDaq` without it raises ConfigError naming
 the extra. One DAQmx task per analog output channel (on-demand for scalars, finite sample-clocked for
@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.daq import AiBlock
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout
+from hamr_bench.interfaces import AiBlock
 
 # DAQmx error codes that mean "it did not happen in time"
 _TIMEOUT_CODES = {-200284, -200560, -200474, -200278}

@@ -23,9 +23,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from drivers.daq import DaqBackend
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout, SafetyLimitError
+from hamr_bench.interfaces import DaqBackend
 
 
 def _positive(name: str, value: float) -> float:

@@ -1,5 +1,7 @@
 """The `hamr-bench` command line: builds the parser from the modules in `hamr_bench.commands` and turns every
-expected failure (`HamrBenchError`) into one line on stderr and a non-zero exit code."""
+expected failure (`HamrBenchError`) into one line on stderr and a non-zero exit code. A command module that fails
+to import is such a failure too (it names the module and why): a broken command must not silently vanish from
+the command line."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import sys
 from hamr_bench import __version__
 from hamr_bench.errors import HamrBenchError
 
-# Order here is the order in `hamr-bench --help`. A module that is not written yet is skipped.
+# Order here is the order in `hamr-bench --help`.
 COMMAND_MODULES = [
     "demo",
     "run",
@@ -44,16 +46,20 @@ def build_parser() -> argparse.ArgumentParser:
         module_name = f"hamr_bench.commands.{name}"
         try:
             module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name == module_name:
-                continue
-            raise
+        except Exception as exc:  # any import failure: named in one line, never skipped
+            why = " ".join(str(exc).split())  # one line, whatever the exception's message looks like
+            raise HamrBenchError(f"command module {module_name} cannot be loaded: {type(exc).__name__}: {why}") \
+                from exc
         module.register(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except HamrBenchError as exc:
+        print(f"hamr-bench: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -1,5 +1,6 @@
 """The typed surfaces of the four bench devices: what protocols and the runner may ask of a stage, a force sensor,
-an amplifier channel and a camera, whatever the backend (real driver or driver-on-emulator).
+an amplifier channel and a camera, whatever the backend (real driver or driver-on-emulator); and the DAQ backend
+surface the analog drivers stand on (`DaqBackend`, `AiBlock`), which a real DAQ and the simulated one both provide.
 
 Units are SI everywhere (m, N, V, s). Every device takes a `Clock` at construction and does all its waiting through
 it. Errors are the `DeviceError` family from `hamr_bench.errors`. Safety limits that protect hardware (voltage clamp,
@@ -14,6 +15,7 @@ Sign conventions shared by the bench and the analysis:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -133,5 +135,64 @@ class Camera(Protocol):
 
     def grab(self) -> Frame:
         """The next frame, blocking until it is exposed."""
+
+    def close(self) -> None: ...
+
+
+# ----------------------------------------------------------------- the DAQ backend under the analog drivers
+# A backend owns one data-acquisition device and speaks in DAQ volts on named channels (`"Dev1/ao0"`,
+# `"Dev1/ai3"`). The real one is `drivers.daq_nidaqmx.NidaqmxBackend`, the simulated bench's
+# `sim_devices.daq_sim.SimDaq`; the analog drivers (TREK amplifier, ATI Nano17) run on either. Backends raise the
+# `DeviceError` family with one-line messages; they never clamp or slew-limit: protecting the hardware is the job
+# of the driver above them. Times are on the rig clock (the `Clock` the backend was built with), in seconds.
+
+
+@dataclass(frozen=True)
+class AiBlock:
+    """A block of analog-input samples: `data_V[c, k]` is channel `c` at time
+    `start_time_s + k / sample_rate_Hz`."""
+
+    start_time_s: float
+    sample_rate_Hz: float
+    data_V: np.ndarray
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return self.start_time_s + np.arange(self.data_V.shape[1]) / self.sample_rate_Hz
+
+
+@runtime_checkable
+class DaqBackend(Protocol):
+    """What the analog drivers ask of a DAQ device."""
+
+    def write_ao_scalar(self, channel: str, value_V: float) -> None:
+        """Software-timed: set the analog output `channel` to `value_V` now (stops a waveform on it first)."""
+
+    def write_ao_waveform(self, channel: str, samples_V: np.ndarray, sample_rate_Hz: float) -> float:
+        """Hardware-timed finite output of `samples_V` at `sample_rate_Hz`, starting now; returns the time of
+        the first sample on the rig clock. The output holds the last sample when the waveform ends. Does not
+        block."""
+
+    def wait_ao_done(self, channel: str, timeout_s: float) -> None:
+        """Block (through the clock) until the waveform on `channel` has ended; DeviceTimeout after
+        `timeout_s`."""
+
+    def stop_ao(self, channel: str) -> float:
+        """Stop any waveform on `channel` now; the output holds the sample being generated. Returns the held
+        value in DAQ volts (the backend's best knowledge of it)."""
+
+    def read_ai(
+        self, channels: Sequence[str], n_samples: int, sample_rate_Hz: float, timeout_s: float = 10.0
+    ) -> AiBlock:
+        """Acquire `n_samples` per channel, hardware-timed, starting now; blocks until they are in.
+        DeviceTimeout if they are not in within `timeout_s`."""
+
+    def start_ai_stream(self, channels: Sequence[str], sample_rate_Hz: float) -> float:
+        """Start continuous acquisition on `channels`; returns the time of the first sample."""
+
+    def read_ai_stream(self) -> AiBlock:
+        """Every sample acquired since the previous call (possibly none); does not block."""
+
+    def stop_ai_stream(self) -> None: ...
 
     def close(self) -> None: ...

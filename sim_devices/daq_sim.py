@@ -1,8 +1,8 @@
 """The simulated DAQ and what hangs off it: HV amplifiers (TREK-style) on its analog outputs and an ATI
 Nano17's six strain-gauge channels on its analog inputs.
 
-`SimDaq` has the surface of `drivers.daq.DaqBackend` (duck-typed: `sim_devices` never imports `drivers`), so
-the real amplifier and Nano17 drivers run on it unchanged. Everything is timed on the injected clock:
+`SimDaq` implements `hamr_bench.interfaces.DaqBackend`, so the real amplifier and Nano17 drivers run on it
+unchanged. Everything is timed on the injected clock:
 
 - Analog output is a zero-order hold of what was written: scalar writes and hardware-timed waveform samples at
   `t0 + k / rate` (the last sample holds). The amplifier output is `gain x AO` (clipped at its rail) through a
@@ -39,6 +39,7 @@ import numpy as np
 
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout
+from hamr_bench.interfaces import AiBlock
 from sim_devices.faults import AMPLIFIER_FAULTS, FORCE_SENSOR_FAULTS, FaultInjector
 
 DAQ_FAULTS = AMPLIFIER_FAULTS + FORCE_SENSOR_FAULTS
@@ -430,7 +431,7 @@ class SimDaq:
 
     def read_ai(
         self, channels: Sequence[str], n_samples: int, sample_rate_Hz: float, timeout_s: float = 10.0
-    ) -> SimAiBlock:
+    ) -> AiBlock:
         if self._active("no_reply") and not self._active("disconnect"):
             self._clock.sleep(timeout_s)  # a read that never completes waits out its timeout
         self._check_link("an analog input read")
@@ -451,7 +452,7 @@ class SimDaq:
         times = t0 + np.arange(n_samples) / sample_rate_Hz
         data = self._ai_values(tuple(channels), times)
         self._clock.sleep(duration_s)
-        return SimAiBlock(t0, float(sample_rate_Hz), data)
+        return AiBlock(t0, float(sample_rate_Hz), data)
 
     def start_ai_stream(self, channels: Sequence[str], sample_rate_Hz: float) -> float:
         self._check_link("an analog input stream start")
@@ -464,7 +465,7 @@ class SimDaq:
         self._stream = (tuple(channels), float(sample_rate_Hz), t0)
         return t0
 
-    def read_ai_stream(self) -> SimAiBlock:
+    def read_ai_stream(self) -> AiBlock:
         self._check_link("an analog input stream read")
         if self._stream is None:
             raise ConfigError("sim DAQ: read_ai_stream() without start_ai_stream()")
@@ -473,7 +474,7 @@ class SimDaq:
         n = int(math.floor((now - t_next) * rate + 1e-9)) + 1 if now >= t_next else 0
         times = t_next + np.arange(n) / rate
         self._stream = (channels, rate, t_next + n / rate)
-        return SimAiBlock(t_next, rate, self._ai_values(channels, times))
+        return AiBlock(t_next, rate, self._ai_values(channels, times))
 
     def stop_ai_stream(self) -> None:
         self._stream = None
@@ -481,15 +482,3 @@ class SimDaq:
     def close(self) -> None:
         self._stream = None
 
-
-@dataclass(frozen=True)
-class SimAiBlock:
-    """Same fields as `drivers.daq.AiBlock` (duck-typed)."""
-
-    start_time_s: float
-    sample_rate_Hz: float
-    data_V: np.ndarray
-
-    @property
-    def times_s(self) -> np.ndarray:
-        return self.start_time_s + np.arange(self.data_V.shape[1]) / self.sample_rate_Hz

@@ -1,52 +1,67 @@
-"""The `[sim]` table of a rig file -> a `SimBench`. Command-line values (design, layers, effects, seed) override the
-file; everything else about the simulated rig (where the sensor touches, sensor range, camera, amplifier gain) is
-in the file."""
+"""The simulated bench as a backend (`simulated-bench`): the `[sim]` table of a rig file -> a `SimBench`.
+
+Command-line values (design, layers, effects, seed) override the file; everything else about the simulated rig
+(where the sensor touches, sensor range, amplifier bandwidth) is in the `[sim]` table, and the simulated hardware
+has the amplifier gain and monitor scale of `[amplifier]` and the camera optics of `[camera]` (checked already by
+`hamr_bench.rig_file`). `SimTable`'s defaults are `BenchSettings`' own.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass, field
 
-from hamr_bench.config import Section, section
+from hamr_bench.backends import BenchOptions
+from hamr_bench.config import load_table, setting
+from hamr_bench.rig_file import RigFile
 from sim_devices.bench import BenchSettings, SimBench, parse_fault
 from sim_devices.bench_effects import check_effects
 
+_DEFAULTS = BenchSettings()
 
-def make_bench(
-    doc: dict[str, Any], source: str, *, design: int | None, layers: int | None, effects: dict[str, float] | None,
-    seed: int | None, fixture: str, faults: list[str] | None = None,
-    model_overrides: dict[str, dict[str, Any]] | None = None,
-) -> SimBench:
-    sim = section(doc, source, "sim")
-    amp = section(doc, source, "amplifier")
-    camera = section(doc, source, "camera", required=False) or Section(source, "camera", {})
-    defaults = BenchSettings()
-    file_effects = check_effects(sim.table_of_floats("effects"), sim.where("effects"))
-    check_effects(dict(effects or {}), "--effects")
-    file_design = sim.int("design", defaults.design, lo=1, hi=5)
-    file_layers = sim.int("layers", defaults.layers, lo=1, hi=3)
-    file_seed = sim.int("seed", defaults.seed)
+
+@dataclass(frozen=True)
+class SimTable:
+    """`[sim]` (simulated rigs only); docs/rig-file.md lists each key."""
+
+    design: int = setting(_DEFAULTS.design, lo=1, hi=5)
+    layers: int = setting(_DEFAULTS.layers, lo=1, hi=3)
+    seed: int = _DEFAULTS.seed
+    params: str = setting(_DEFAULTS.params_set, choices=("reported", "effective"))
+    effects: dict[str, float] = field(default_factory=dict)
+    touch_stage_m: float = _DEFAULTS.touch_stage_m
+    stage_travel_m: tuple[float, float] = _DEFAULTS.stage_limits_m
+    stage_velocity_m_per_s: float = setting(_DEFAULTS.stage_velocity_m_per_s, positive=True)
+    loadstar_capacity_kg: float = setting(_DEFAULTS.loadstar_capacity_kg, positive=True)
+    loadstar_resolution_kg: float = setting(_DEFAULTS.loadstar_resolution_kg, positive=True)
+    amplifier_bandwidth_Hz: float = setting(_DEFAULTS.amp_bandwidth_Hz, positive=True)
+    noise: bool = _DEFAULTS.noise
+
+
+def make_bench(rig_file: RigFile, options: BenchOptions) -> SimBench:
+    place = rig_file.place("sim")
+    sim = load_table(SimTable, rig_file.sim, place)
+    file_effects = check_effects(sim.effects, place.key("effects"))
+    check_effects(dict(options.effects), "--effects")
+    camera = rig_file.camera
     settings = BenchSettings(
-        fixture=fixture,
-        design=design if design is not None else file_design,
-        layers=layers if layers is not None else file_layers,
-        params_set=sim.str("params", defaults.params_set, choices=("reported", "effective")),
-        effects={**file_effects, **(effects or {})},
-        seed=seed if seed is not None else file_seed,
-        touch_stage_m=sim.float("touch_stage_m", defaults.touch_stage_m),
-        stage_limits_m=sim.float_pair("stage_travel_m", defaults.stage_limits_m),
-        stage_velocity_m_per_s=sim.float("stage_velocity_m_per_s", defaults.stage_velocity_m_per_s, positive=True),
-        loadstar_capacity_kg=sim.float("loadstar_capacity_kg", defaults.loadstar_capacity_kg, positive=True),
-        loadstar_resolution_kg=sim.float("loadstar_resolution_kg", defaults.loadstar_resolution_kg, positive=True),
-        # The simulated hardware has the gain, monitor scale and optics the rig file says the real one has.
-        amp_gain_V_per_V=amp.float("gain_V_per_V", defaults.amp_gain_V_per_V, positive=True),
-        amp_monitor_scale_V_per_V=amp.float("monitor_scale_V_per_V", defaults.amp_monitor_scale_V_per_V,
-                                            positive=True),
-        amp_bandwidth_Hz=sim.float("amplifier_bandwidth_Hz", defaults.amp_bandwidth_Hz, positive=True),
-        camera_frame_rate_Hz=camera.float("frame_rate_Hz", defaults.camera_frame_rate_Hz, positive=True),
-        metres_per_pixel=camera.float("metres_per_pixel", defaults.metres_per_pixel, positive=True),
-        noise=sim.bool("noise", defaults.noise),
-        faults=tuple(parse_fault(f) for f in (faults or [])),
-        model_overrides=dict(model_overrides or {}),
+        fixture=options.fixture,
+        design=options.design if options.design is not None else sim.design,
+        layers=options.layers if options.layers is not None else sim.layers,
+        params_set=sim.params,
+        effects={**file_effects, **options.effects},
+        seed=options.seed if options.seed is not None else sim.seed,
+        touch_stage_m=sim.touch_stage_m,
+        stage_limits_m=sim.stage_travel_m,
+        stage_velocity_m_per_s=sim.stage_velocity_m_per_s,
+        loadstar_capacity_kg=sim.loadstar_capacity_kg,
+        loadstar_resolution_kg=sim.loadstar_resolution_kg,
+        amp_gain_V_per_V=rig_file.amplifier.gain_V_per_V,
+        amp_monitor_scale_V_per_V=rig_file.amplifier.monitor_scale_V_per_V,
+        amp_bandwidth_Hz=sim.amplifier_bandwidth_Hz,
+        camera_frame_rate_Hz=camera.frame_rate_Hz if camera else _DEFAULTS.camera_frame_rate_Hz,
+        metres_per_pixel=camera.metres_per_pixel if camera else _DEFAULTS.metres_per_pixel,
+        noise=sim.noise,
+        faults=tuple(parse_fault(f) for f in options.faults),
+        model_overrides={k: dict(v) for k, v in options.model_overrides.items()},
     )
-    sim.check_no_unknown_keys()
     return SimBench(settings)

@@ -12,6 +12,7 @@ The generator forms (sim_devices.bench_effects) differ from the candidate forms 
 
 from __future__ import annotations
 
+import functools
 import tempfile
 import time
 from dataclasses import dataclass
@@ -82,7 +83,17 @@ def backlash_detection_limit_m(overdispersion: float = 1.0) -> float:
 # Below the limit the trials count in every score, and the accuracy is ALSO reported without them. (Before the
 # actuator protocol reversed the stage against the actuator, the limit was ~10 um: only the leg's static test
 # reversed it, against 1-5 N/m.)
-DETECTION_LIMIT: dict[str, float] = {"stage_backlash": backlash_detection_limit_m()}
+@functools.cache
+def detection_limits() -> dict[str, float]:
+    """`DETECTION_LIMIT`, computed on first use: it reads the simulated bench's sensor model, which importing this
+    module must not load."""
+    return {"stage_backlash": backlash_detection_limit_m()}
+
+
+def __getattr__(name: str) -> Any:
+    if name == "DETECTION_LIMIT":  # effect name -> smallest detectable strength (detection_limits)
+        return detection_limits()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 # Coverage is scored on effects whose size means the same physical thing in generator and candidate. For most the
 # strength itself does (loop half-width, per-decade creep, blocked-force loss, compliance, metres); for two the
@@ -238,13 +249,13 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     def frac(a: int, b: int) -> float | None:
         return a / b if b else None
 
-    detectable = [t for t in lib if abs(t.strength) >= DETECTION_LIMIT.get(t.truth, 0.0)]
+    detectable = [t for t in lib if abs(t.strength) >= detection_limits().get(t.truth, 0.0)]
     return {
         "trials": len(trials),
         "library_trials": len(lib), "null_trials": len(nulls), "decoy_trials": len(decoys),
         "top1_accuracy": frac(sum(t.best == t.truth for t in lib), len(lib)),
         "top1_accuracy_above_detection_limit": frac(sum(t.best == t.truth for t in detectable), len(detectable)),
-        "trials_above_detection_limit": len(detectable), "detection_limits": dict(DETECTION_LIMIT),
+        "trials_above_detection_limit": len(detectable), "detection_limits": dict(detection_limits()),
         "top1_by_effect": {n: [sum(t.best == t.truth for t in lib if t.truth == n),
                                sum(1 for t in lib if t.truth == n)] for n in LIBRARY if any(t.truth == n for t in lib)},
         "truth_in_ambiguous_set": frac(sum(t.best is None and t.top_verdict == "ambiguous" and

@@ -3,17 +3,16 @@ a plan out on a rig. `PROTOCOLS` maps each command-line name to its module."""
 
 from __future__ import annotations
 
-from types import ModuleType
-
 from hamr_bench.errors import ConfigError
 from hamr_bench.protocols import actuator, blocked_force, free_displacement, sag_sweep, static
+from hamr_bench.protocols.plan import ProtocolModule
 
-PROTOCOLS: dict[str, ModuleType] = {
+PROTOCOLS: dict[str, ProtocolModule] = {
     m.NAME: m for m in (actuator, blocked_force, sag_sweep, free_displacement, static)
 }
 
 
-def get_protocol(name: str) -> ModuleType:
+def get_protocol(name: str) -> ProtocolModule:
     try:
         return PROTOCOLS[name]
     except KeyError:

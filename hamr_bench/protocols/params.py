@@ -1,17 +1,18 @@
 """Protocol parameters: every protocol's parameters are a frozen dataclass whose defaults follow the paper. This
-module turns a protocol file (TOML) and `--set name=value` options into such a dataclass, with errors that name
-the file or option, the parameter and what was expected."""
+module turns a protocol file (TOML) and `--set name=value` options into such a dataclass through the one
+configuration loader (`hamr_bench.config`), with errors that name the file or option, the parameter and what was
+expected, then runs the dataclasses' own `validate()` for the rules that span fields."""
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import typing
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from hamr_bench.config import load_toml
+from hamr_bench.config import Place, load_table, load_toml
 from hamr_bench.errors import ConfigError
+
+P = TypeVar("P")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,58 +45,10 @@ def field_names(cls: type) -> list[str]:
     return [f.name for f in dataclasses.fields(cls)]
 
 
-def _coerce(where: str, name: str, annotation: Any, value: Any) -> Any:
-    origin = typing.get_origin(annotation)
-    if origin is tuple:
-        (item_type, _ellipsis) = typing.get_args(annotation)
-        if isinstance(value, str):
-            value = [v for v in value.split(",") if v.strip()]
-        if not isinstance(value, (list, tuple)) or not value:
-            raise ConfigError(f"{where}: {name}: expected a non-empty list, got {value!r}")
-        return tuple(_coerce(where, name, item_type, v) for v in value)
-    if annotation is bool:
-        if isinstance(value, str) and value.lower() in ("true", "false"):
-            return value.lower() == "true"
-        if isinstance(value, bool):
-            return value
-        raise ConfigError(f"{where}: {name}: expected true or false, got {value!r}")
-    if annotation is int:
-        try:
-            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                raise ValueError
-            return int(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: {name}: expected an integer, got {value!r}") from None
-    if annotation is float:
-        try:
-            if isinstance(value, bool):
-                raise ValueError
-            number = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: {name}: expected a number, got {value!r}") from None
-        if not math.isfinite(number):
-            raise ConfigError(f"{where}: {name}: expected a finite number, got {value!r}")
-        return number
-    if annotation is str:
-        return str(value)
-    raise ConfigError(f"{where}: {name}: cannot be set from a file")
-
-
-def override(params: Any, values: dict[str, Any], where: str) -> Any:
-    """A copy of `params` with `values` applied (nested tables such as `drive` and `contact` allowed)."""
-    hints = typing.get_type_hints(type(params))
-    changes: dict[str, Any] = {}
-    for name, value in values.items():
-        if name not in hints:
-            known = ", ".join(field_names(type(params)))
-            raise ConfigError(f"{where}: unknown parameter {name!r} (known: {known})")
-        if dataclasses.is_dataclass(hints[name]):
-            if not isinstance(value, dict):
-                raise ConfigError(f"{where}: {name}: expected a table of {name} parameters")
-            changes[name] = override(getattr(params, name), value, f"{where} {name}")
-        else:
-            changes[name] = _coerce(where, name, hints[name], value)
-    return dataclasses.replace(params, **changes)
+def override(params: P, values: dict[str, Any], where: str) -> P:
+    """A copy of `params` with `values` applied (nested tables such as `drive` and `contact` allowed); values may be
+    text (`--set`), as the one configuration loader (`hamr_bench.config.load_table`) accepts them here."""
+    return load_table(type(params), values, Place(where), base=params, from_text=True)
 
 
 def parse_set_options(options: list[str]) -> dict[str, Any]:

@@ -1,14 +1,32 @@
-"""The vocabulary of protocol plans: the messages a protocol yields and the runner carries out.
+"""The vocabulary of protocol plans: the messages a protocol yields and the runner carries out, and what a protocol
+module is (`ProtocolModule`).
 
 A protocol is a generator of these messages (bluesky-style): it says what to do, never how. The runner owns
-timing, sampling, safety and recording. `FindContact` and `ReadForce` send a value back into the generator, so a
-plan can react to what it measured (the approach to zero sag) without touching a device.
+timing, sampling, safety and recording. `FindContact`, `ReadForce` and `ReadStage` send a value back into the
+generator, so a plan can react to what it measured (the approach to zero sag) without touching a device.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
+
+# A plan: yields messages, receives each one's reply, may return a value (a sub-plan's result).
+Plan = Generator[Any, Any, Any]
+
+
+class ProtocolModule(Protocol):
+    """What a protocol module provides (one module per protocol in `hamr_bench.protocols`)."""
+
+    NAME: str  # the command-line name
+    FIXTURE: str  # "leg" or "actuator": which sensor table of the rig file the run uses
+    SUMMARY: str  # one line for `run --help`
+    Params: Callable[[], Any]  # the parameter dataclass; its defaults follow the paper
+
+    def plan(self, p: Any) -> Plan: ...
+
+    def step_count(self, p: Any) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -86,3 +104,24 @@ class ReadForce:
     """Average the force over `duration_s`; sends back the mean in N."""
 
     duration_s: float
+
+
+@dataclass(frozen=True)
+class ReadStage:
+    """Ask where the stage is (one position query, not recorded); sends back a `StageState`."""
+
+
+@dataclass(frozen=True)
+class StageState:
+    position_m: float
+    limits_m: tuple[float, float]
+    toward_leg_sign: float  # +1 or -1: the rig's direction that moves the sensor toward the leg
+
+
+@dataclass(frozen=True)
+class RecordEvent:
+    """Record an `/events` message (a result the plan found, such as `contact_found`) at the present time."""
+
+    kind: str
+    message: str = ""
+    data: dict[str, Any] = field(default_factory=dict)

@@ -1,14 +1,16 @@
-"""Replaying a recorded timeline on a rig: the plan messages a replay adds to the runner's vocabulary, the runner
-that carries them out, and the session that builds the (simulated) rig and writes the twin's metadata.
+"""Replaying a recorded timeline on a rig: the plan messages a replay adds to the runner's vocabulary, the commands
+that carry them out (registered on a plain `Runner`, built on its public primitives), and the session that builds
+the (simulated) rig and writes the twin's metadata.
 
 A replay plan is not a protocol: it is the list of operations a recording shows, each at its recorded time
 (`analysis.replay` builds it from a recording). Operations the runner already knows (Home, Tare, Step,
-SetVoltages) are reused, so the twin's devices see the same driver calls as the source run did. Four messages are
-added here, handled by `ReplayRunner` (a subclass: the runner's own code and behaviour are unchanged):
+SetVoltages, RecordEvent) are reused, so the twin's devices see the same driver calls as the source run did. Three
+messages are added here, carried out by `ReplayCommands` (safety, sampling and the end of the run stay the
+runner's):
 
 - `WaitUntil(time_s, ...)`: idle until an absolute rig-clock time, reading what the source read in that gap: every
-  stream at the source's dwell passes (a Dwell), the force stream as the contact search's force averaging does
-  (runner code), or nothing (the source was waiting on a device query).
+  stream at the source's dwell passes (the runner's dwell, paced by them), the force stream as the contact
+  search's force averaging does (the runner's `mean_force`), or nothing (the source was waiting on a device query).
   Reading as the source did keeps the twin's DAQ reads (each draws DAQ noise, in blocks the size of the read) and
   its force-read times (a serial sensor's read stamps the samples it collects) identical to the source's.
 - `StageCommand(target_m)`: one recorded stage set-point, issued at once (no position query first: the source's
@@ -17,7 +19,8 @@ added here, handled by `ReplayRunner` (a subclass: the runner's own code and beh
 - `ReplayDrive(waveform_V, sample_rate_Hz, start_s, track)`: the recorded drive samples; if the twin reaches the
   drive after its recorded start (slower devices than the source's), the samples already due are skipped so the rest
   plays at its recorded times.
-- `Note(kind, message, data)`: copies a source event that marks a result rather than an operation (contact_found).
+- `Note` is the runner's `RecordEvent`: it copies a source event that marks a result rather than an operation
+  (contact_found).
 """
 
 from __future__ import annotations
@@ -25,18 +28,20 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any, Callable, Iterable
+from typing import Any
 
+from hamr_bench import backends
 from hamr_bench.errors import ConfigError, SafetyLimitError
-from hamr_bench.protocols.plan import Drive, Home
-from hamr_bench.protocols.runner import FORCE_WINDOW_S, Progress, RunResult, Runner
-from hamr_bench.rig import load_builder
+from hamr_bench.protocols.contact import FORCE_WINDOW_S
+from hamr_bench.protocols.plan import Drive, Home, Plan, ReadStage, RecordEvent
+from hamr_bench.protocols.runner import RunResult, Runner
 
 STEP_SLACK_M = 1e-6  # 1 um: above the positioning error of a queried position, far below what the force limit sees
 WAIT_TOLERANCE_S = 1e-9  # a wait shorter than this is float noise between chained operations, not idle time
+Note = RecordEvent
 
 
 @dataclass(frozen=True)
@@ -46,7 +51,7 @@ class WaitUntil:
     - source dwell passes still to come (`pass_times_s`: when the runner recorded the amplifier monitors, which it
       does once per pass of a dwell) -> the runner's own dwell, one pass at each of those times;
     - else `poll_force` (the source's force stream ran, no dwell) -> the contact search's force averaging
-      (`Runner._mean_force(FORCE_WINDOW_S)`), after a stage query if `after_query` (the search's first step);
+      (`Runner.mean_force(FORCE_WINDOW_S)`), after a stage query if `after_query` (the search's first step);
     - else `dwell` (a source without monitor streams, e.g. an imported trace) -> the runner's plain dwell;
     - else nothing is read (the source was busy with a device query)."""
 
@@ -56,32 +61,6 @@ class WaitUntil:
     after_query: bool = False
     dwell: bool = False
     track: bool = False
-
-
-class _ScheduledClock:
-    """The rig clock for the runner's dwell loop during a replay: a sleep ends at the source's next pass instead
-    of after the runner's own poll interval, so the passes fall where the source's did without knowing when the
-    source's dwell was due to end (the runner shortens its last sleep to end on time, which the recording does
-    not show). Everything else is the rig clock."""
-
-    def __init__(self, clock: Any, pass_times_s: list[float]) -> None:
-        self._clock = clock
-        self._times = pass_times_s
-        self.is_virtual = getattr(clock, "is_virtual", False)
-
-    def now_s(self) -> float:
-        return self._clock.now_s()
-
-    def sleep(self, duration_s: float) -> None:
-        now = self._clock.now_s()
-        upcoming = [t for t in self._times if t > now + WAIT_TOLERANCE_S]
-        if upcoming and hasattr(self._clock, "advance_to"):
-            self._clock.advance_to(upcoming[0])
-        else:
-            self._clock.sleep(duration_s)
-
-    def advance_to(self, time_s: float) -> None:
-        self._clock.advance_to(time_s)
 
 
 @dataclass(frozen=True)
@@ -97,116 +76,81 @@ class ReplayDrive:
     track: bool = False
 
 
-@dataclass(frozen=True)
-class Note:
-    kind: str
-    message: str = ""
-    data: dict[str, Any] = field(default_factory=dict)
+class ReplayCommands:
+    """The replay messages as commands of one runner (`register` adds them), and what they remember between
+    messages: where the last stage command left the stage (a command needs it without a query)."""
 
-
-class ReplayRunner(Runner):
-    """The runner plus the replay messages. Everything else (safety, sampling, the end of the run) is inherited."""
-
-    def __init__(self, rig: Any, recorder: Any, progress: Progress | None = None) -> None:
-        super().__init__(rig, recorder, progress)
+    def __init__(self, runner: Runner) -> None:
+        self.runner = runner
         self._stage_at_m: float | None = None
-        self._last_stage_read_m: float | None = None
-        self._query_s = 0.0
         self.drive_samples_skipped = 0
 
-    def _execute(self, plan) -> None:
-        # The runner carries out every message it knows; the replay messages are handled here on the way.
-        super()._execute(self._intercept(plan))
+    def register(self) -> None:
+        runner = self.runner
+        runner.register_command(WaitUntil, self.wait_until)
+        runner.register_command(StageCommand, self.stage_command)
+        runner.register_command(ReplayDrive, self.replay_drive)
+        home = runner.command(Home)
 
-    def _intercept(self, plan):
-        handlers: dict[type, Callable[[Any], Any]] = {
-            WaitUntil: self._wait_until, StageCommand: self._stage_command, ReplayDrive: self._replay_drive,
-            Note: self._note,
-        }
-        reply = None
-        while True:
-            try:
-                message = plan.send(reply)
-            except StopIteration:
-                return
-            handler = handlers.get(type(message))
-            if handler is not None:
-                reply = handler(message)
-            else:
-                if isinstance(message, Home):
-                    self._stage_at_m = None  # known again from the reading the runner takes after homing
-                reply = yield message
+        def home_again(msg: Home) -> Any:
+            self._stage_at_m = None  # known again from the reading the runner takes after homing
+            return home(msg)
 
-    def _record_stage(self) -> None:
-        # As the runner's, but keep the reading: the next stage command needs the position without a query.
-        now = self.clock.now_s()  # stamped before the query, as the runner does
-        self._last_stage_read_m = self.rig.stage.position_m()
-        self._query_s = self.clock.now_s() - now  # how long a stage query takes (force-poll waits end before one)
-        self.rec.write_scalar("/stage/position", now, position_m=self._last_stage_read_m)
+        runner.register_command(Home, home_again)
 
     def _advance_to(self, time_s: float) -> None:
-        now = self.clock.now_s()
-        if getattr(self.clock, "is_virtual", False) and hasattr(self.clock, "advance_to"):
-            self.clock.advance_to(time_s)  # land exactly on the recorded time, not on now + (t - now)
+        clock = self.runner.clock
+        now = clock.now_s()
+        advance_to = getattr(clock, "advance_to", None)
+        if clock.is_virtual and advance_to is not None:
+            advance_to(time_s)  # land exactly on the recorded time, not on now + (t - now)
         elif time_s > now:
-            self.clock.sleep(time_s - now)
+            clock.sleep(time_s - now)
 
-    def _wait_until(self, msg: WaitUntil) -> None:
-        now = self.clock.now_s()
+    def wait_until(self, msg: WaitUntil) -> None:
+        runner, clock = self.runner, self.runner.clock
+        now = clock.now_s()
         passes = [t for t in msg.pass_times_s if t > now + WAIT_TOLERANCE_S]
-        if passes and getattr(self.clock, "is_virtual", False) and hasattr(self.clock, "advance_to"):
+        if passes and clock.is_virtual and hasattr(clock, "advance_to"):
             # The runner's own dwell, paced by the source's passes; it ends after the pass at the last one.
-            rig_clock = self.clock
-            self.clock = _ScheduledClock(rig_clock, passes)
-            try:
-                self._sample_until(passes[-1], track=msg.track)
-            finally:
-                self.clock = rig_clock
+            runner.sample_until(passes[-1], track=msg.track, wake_times_s=passes)
         elif passes or (msg.dwell and msg.time_s - now >= WAIT_TOLERANCE_S):
-            self._sample_until(msg.time_s, track=msg.track)
+            runner.sample_until(msg.time_s, track=msg.track)
         elif msg.poll_force:
-            # The contact search's force averaging (the runner's own, FORCE_WINDOW_S long) between its stage
-            # steps; its first one follows a stage query (the search asks where it starts from).
-            start = now + (self._query_s if msg.after_query else 0.0)
+            # The contact search's force averaging (FORCE_WINDOW_S long) between its stage steps; its first one
+            # follows a stage query (the search asks where it starts from).
+            start = now + (runner.stage_query_s if msg.after_query else 0.0)
             if msg.time_s - start >= FORCE_WINDOW_S - WAIT_TOLERANCE_S:
                 self._advance_to(start)
-                self._mean_force(FORCE_WINDOW_S)
-        if msg.time_s - self.clock.now_s() >= WAIT_TOLERANCE_S:
+                runner.mean_force(FORCE_WINDOW_S)
+        if msg.time_s - clock.now_s() >= WAIT_TOLERANCE_S:
             self._advance_to(msg.time_s)
 
-    def _stage_command(self, msg: StageCommand) -> None:
+    def stage_command(self, msg: StageCommand) -> None:
+        runner = self.runner
         target = float(msg.target_m)
-        low, high = self.rig.stage.limits_m
+        low, high = runner.rig.stage.limits_m
         if not (math.isfinite(target) and low <= target <= high):
             raise SafetyLimitError(
                 f"recorded stage target {target * 1e3:.4f} mm is outside the soft limits "
                 f"[{low * 1e3:.3f}, {high * 1e3:.3f}] mm")
-        position = self._stage_at_m if self._stage_at_m is not None else self._last_stage_read_m
+        position = self._stage_at_m if self._stage_at_m is not None else runner.last_stage_position_m
         if position is None:
-            position = self.rig.stage.position_m()
-        toward_leg = (target - position) * self.rig.stage_toward_leg_sign > 0
+            position = runner.perform(ReadStage()).position_m
         # The source split its moves from a queried position (reported to the controller's resolution), so its
-        # recorded steps can exceed the safe step by that rounding; STEP_SLACK_M allows for it.
-        if toward_leg and abs(target - position) > self.rig.limits.max_stage_step_m + STEP_SLACK_M:
-            self._move_in_safe_steps(target)  # an imported trace may jump; keep the force check between steps
-        else:
-            self.rec.write_scalar("/stage/command", self.clock.now_s(), target_m=target)
-            self.rig.stage.move_to(target)
-            self._record_stage()
-            self._drain_force()
+        # recorded steps can exceed the safe step by that rounding; STEP_SLACK_M allows for it. An imported trace
+        # may jump: the runner then steps, with the force check between steps.
+        runner.move_stage(target, from_m=position, step_slack_m=STEP_SLACK_M)
         self._stage_at_m = target
 
-    def _replay_drive(self, msg: ReplayDrive) -> None:
+    def replay_drive(self, msg: ReplayDrive) -> None:
         samples = tuple(msg.waveform_V)
-        late_s = self.clock.now_s() - msg.start_s
+        late_s = self.runner.clock.now_s() - msg.start_s
         if late_s > WAIT_TOLERANCE_S and len(samples) > 1:
             skip = min(len(samples) - 1, math.ceil(late_s * msg.sample_rate_Hz - 1e-9))
             samples = samples[skip:]
             self.drive_samples_skipped += skip
-        self._drive(Drive(samples, msg.sample_rate_Hz, msg.track))
-
-    def _note(self, msg: Note) -> None:
-        self._event(msg.kind, msg.message, **msg.data)
+        self.runner.perform(Drive(samples, msg.sample_rate_Hz, msg.track))
 
 
 @dataclass
@@ -235,9 +179,8 @@ class ReplayRequest:
     traffic_from: Path | None = None
 
 
-def _plan(items: Iterable[Any]):
-    for item in items:
-        yield item
+def _plan(items: Iterable[Any]) -> Plan:
+    yield from items
 
 
 def run_replay(req: ReplayRequest) -> RunResult:
@@ -290,12 +233,13 @@ def run_replay(req: ReplayRequest) -> RunResult:
             params = params_from_recording(req.protocol, req.protocol_params_json)
             result = Runner(rig, recorder, progress).run(protocol, params)
         else:
-            protocol = SimpleNamespace(NAME=f"replay of {req.protocol}", plan=_plan)
-            result = ReplayRunner(rig, recorder, progress).run(protocol, req.items)
+            runner = Runner(rig, recorder, progress)
+            ReplayCommands(runner).register()
+            result = runner.run_plan(_plan(req.items), f"replay of {req.protocol}")
     finally:
         rig.close()
         for url, _endpoint in served:
-            load_builder("sim_devices.traffic_replay:close_served")(url)
+            backends.traffic_server().close_served(url)
     unfinished = [f"{e.device} ({e.writes} of {e.recorded_writes} writes)" for _u, e in served if not e.complete]
     if result.ok and unfinished:  # the driver stopped short of the recorded conversation: also a difference
         return RunResult("failed", "traffic replay: the drivers made fewer writes than recorded: "
@@ -305,17 +249,15 @@ def run_replay(req: ReplayRequest) -> RunResult:
 
 def _traffic_ports(source: Path, served: list[tuple[str, Any]]) -> dict[str, Callable[[Any], str]]:
     """Port factories for the rig: each serial role with a recorded /traffic stream is served from it."""
-    traffic = load_builder("sim_devices.traffic_replay:traffic_topics")(source)
-    role_of = load_builder("sim_devices.traffic_replay:role_of")
-    serve = load_builder("sim_devices.traffic_replay:serve_traffic")
+    server = backends.traffic_server()
     ports: dict[str, Callable[[Any], str]] = {}
-    for topic in traffic:
-        role = role_of(topic)
+    for topic in server.traffic_topics(source):
+        role = server.role_of(topic)
         if role is None:
             continue
 
         def make_port(clock: Any, topic: str = topic) -> str:
-            url, endpoint = serve(source, topic, clock)
+            url, endpoint = server.serve_traffic(source, topic, clock)
             served.append((url, endpoint))
             return url
 

@@ -47,6 +47,7 @@ class TqdmProgress:
 
         # disable=None: no bar when stderr is not a terminal (a log file or CI gets the result lines, not redraws)
         self.bar = tqdm(total=total, desc=description, unit="step", leave=False, dynamic_ncols=True, disable=None)
+        self.total = total
         self.last = -1
 
     def step(self, index: int, label: str) -> None:
@@ -57,7 +58,7 @@ class TqdmProgress:
 
     def close(self, completed: bool = True) -> None:
         if completed:  # a failed run keeps the bar where it stopped
-            self.bar.update(self.bar.total - self.bar.n)
+            self.bar.update(self.total - self.bar.n)
         self.bar.close()
 
 
@@ -114,7 +115,8 @@ def _write_metadata(recorder: Any, req: RunRequest, protocol: Any, params: Any, 
     recorder.add_metadata("software", software_versions())
     recorder.add_metadata("run", {
         "seed": str(req.seed), "clock": "virtual" if rig.clock.is_virtual else "real",
-        "effects": json.dumps(req.effects), "faults": json.dumps(req.faults), "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "effects": json.dumps(req.effects), "faults": json.dumps(req.faults),
+        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         **{k: str(v) for k, v in rig.settings.get("run_metadata", {}).items()}})
     for name, values in req.extra_metadata.items():
         recorder.add_metadata(name, values)

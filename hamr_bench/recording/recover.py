@@ -95,21 +95,21 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
             last_log = record.log_time if last_log is None else max(last_log, record.log_time)
             first_log = record.log_time if first_log is None else min(first_log, record.log_time)
         elif isinstance(record, SchemaRecord):
-            key = (record.name, record.encoding, record.data)
-            if key not in schema_keys:
-                schema_keys[key] = writer.register_schema(record.name, record.encoding, record.data)
-                schema_names[schema_keys[key]] = record.name
-            schema_ids[record.id] = schema_keys[key]
+            schema_key = (record.name, record.encoding, record.data)
+            if schema_key not in schema_keys:
+                schema_keys[schema_key] = writer.register_schema(record.name, record.encoding, record.data)
+                schema_names[schema_keys[schema_key]] = record.name
+            schema_ids[record.id] = schema_keys[schema_key]
         elif isinstance(record, ChannelRecord):
-            key = (record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0))
-            if key not in channel_keys:
-                channel_keys[key] = writer.register_channel(
-                    record.topic, record.message_encoding, key[2], record.metadata
+            channel_key = (record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0))
+            if channel_key not in channel_keys:
+                channel_keys[channel_key] = writer.register_channel(
+                    record.topic, record.message_encoding, channel_key[2], record.metadata
                 )
-                topics[channel_keys[key]] = record.topic
-                if schema_names.get(key[2]) in schemas.IMAGE_SCHEMAS:
-                    stored_channels.add(channel_keys[key])
-            channel_ids[record.id] = channel_keys[key]
+                topics[channel_keys[channel_key]] = record.topic
+                if schema_names.get(channel_key[2]) in schemas.IMAGE_SCHEMAS:
+                    stored_channels.add(channel_keys[channel_key])
+            channel_ids[record.id] = channel_keys[channel_key]
         elif isinstance(record, MetadataRecord):
             if record.name == "run_end":
                 source_run_end = dict(record.values)

@@ -84,11 +84,12 @@ def run_cli(protocol: str, out: Path, *, faults: tuple[str, ...] = (), seed: int
     def capture(*args: Any, **kwargs: Any) -> Any:
         rig = real_load_rig(*args, **kwargs)
         captured.append(rig)
-        if rig.bench is not None:  # log when the run talks to the devices that can sit idle for long
+        bench: Any = rig.bench  # the simulated bench itself (its emulators), beyond the backend surface
+        if bench is not None:  # log when the run talks to the devices that can sit idle for long
             for method in ("read_ai", "write_ao_scalar", "write_ao_waveform", "wait_ao_done", "stop_ao",
                            "start_ai_stream", "read_ai_stream"):
-                _log_calls(rig.bench.daq, method, calls["daq"], rig.bench.clock)
-            _log_calls(rig.bench.camera, "grab", calls["camera"], rig.bench.clock)
+                _log_calls(bench.daq, method, calls["daq"], bench.clock)
+            _log_calls(bench.camera, "grab", calls["camera"], bench.clock)
         return rig
 
     where = ["--rig", str(rig)] if rig is not None else ["--sim"]
