@@ -29,6 +29,7 @@ from hamr_bench.errors import ConfigError
 MODES = ("roi", "full", "png", "none")
 DEFAULT_ROI_PX = 64
 DEFAULT_FULL_FRAME_INTERVAL_S = 1.0
+_TIME_TOLERANCE_S = 1e-9  # frame times are sums of periods: 0.2 + 0.1 must count as 0.3
 PNG_LEVEL = 1  # zlib level: 1 is within 10 % of the best size on camera frames for a quarter of level 6's time
 
 
@@ -101,7 +102,7 @@ class FramePlanner:
             return [FrameWrite(self._full_topic, encode_png(image), "png", True)], None
         writes: list[FrameWrite] = []
         origin = region_origin(image.shape, marker_px, self.storage.roi_px)
-        if origin is None or time_s >= self._next_full_s:
+        if origin is None or time_s >= self._next_full_s - _TIME_TOLERANCE_S:
             # A frame without a marker fix is kept whole (nothing a re-analysis would need is lost).
             writes.append(FrameWrite(self._full_topic, image, "raw", False))
             if origin is not None:
