@@ -179,3 +179,38 @@ class FoxgloveClient:
                 self.services[s["name"]] = s["id"]
         elif op == "serviceCallFailure":
             self._replies[body["callId"]] = ("failure", body.get("message", ""))
+
+
+def latency_summary(received: list[Received]) -> dict[str, dict[str, float]]:
+    """Per topic: messages, and the delay from each message's own time (its log time) to its arrival, in ms."""
+    by_topic: dict[str, list[float]] = {}
+    for m in received:
+        by_topic.setdefault(m.topic, []).append((m.receive_ns - m.log_ns) / 1e6)
+    out = {}
+    for topic, delays in sorted(by_topic.items()):
+        ordered = sorted(delays)
+        out[topic] = {"messages": len(ordered), "median_ms": ordered[len(ordered) // 2],
+                      "p95_ms": ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))], "max_ms": ordered[-1]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m benchmarks.foxglove_ws_client URL --seconds S`: watch every topic for S seconds (or until the
+    server closes) and print the per-topic latency summary as JSON (the live benchmark's client process)."""
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("url")
+    parser.add_argument("--seconds", type=float, default=10.0)
+    args = parser.parse_args(argv)
+    client = FoxgloveClient(args.url, keep_payloads=False).start()
+    client.wait_for(lambda c: c._closed.is_set(), args.seconds)
+    received = list(client.received)
+    client.close()
+    json.dump({"topics": latency_summary(received), "errors": client.errors}, sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -35,7 +35,7 @@ from hamr_bench.recording.contract import Topic
 from hamr_bench.recording.tap import TapChannel
 
 TICK_S = 0.02
-DEFAULT_MAX_RATE_HZ = 500.0
+DEFAULT_MAX_RATE_HZ = 250.0
 DEFAULT_FRAME_RATE_HZ = 10.0
 MAX_PASS_THROUGH_PER_TICK = 500  # events / logs / traffic: a burst beyond this keeps its newest
 BACKLOG_MESSAGES = 2048  # per client, in the SDK: ~0.2 s of everything a client can subscribe to
@@ -83,6 +83,7 @@ class LiveServer:
         self._runs = 0
         self.published = 0
         self.dropped_by_tap = 0
+        self.publish_delays_ms: list[float] = []  # the newest message of each batch: its age when handed to the SDK
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -196,6 +197,8 @@ class LiveServer:
         for time_s, payload in messages:
             log_ns = start_ns + round(time_s * 1e9) if math.isfinite(time_s) else start_ns
             log(payload, log_time=max(log_ns, 0))
+        if messages:
+            self.publish_delays_ms.append((time.time_ns() - log_ns) / 1e6)
         self.published += len(messages)
 
     def _thin(self, published: _Published, messages: list[tuple[float, bytes]],
