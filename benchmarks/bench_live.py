@@ -50,7 +50,7 @@ def _produce(sink: Any, tick: int, frames: list[np.ndarray], markers: list[tuple
     t0 = tick * TICK_S
     force_t = (t0 + np.arange(int(FORCE_HZ * TICK_S)) / FORCE_HZ).tolist()
     force = (0.05 * np.sin(2 * np.pi * 10 * np.asarray(force_t))).tolist()
-    for t, f in zip(force_t, force):
+    for t, f in zip(force_t, force, strict=True):
         sink.write_scalar("/force", t, force_N=f)
     for t in (t0 + np.arange(int(SLOW_HZ * TICK_S)) / SLOW_HZ).tolist():
         sink.write_scalar("/stage/position", t, position_m=1e-3)
@@ -126,16 +126,16 @@ def live_latency(duration_s: float, out_dir: Path) -> dict[str, Any]:
     finally:
         view.stop()  # the client sees the connection close and prints its summary
         out, err = client.communicate(timeout=60)
-    report = json.loads(out) if out.strip() else {"topics": {}, "errors": [err[-500:]]}
-    topics = report["topics"]
-    scalars = [t for t in ("/force", "/stage/position", "/amplifier/drive/monitor") if t in topics]
-    images = [t for t in ("/camera/image", "/camera/roi") if t in topics]
+    report: dict[str, Any] = json.loads(out) if out.strip() else {"topics": {}, "errors": [err[-500:]]}
+    topics: dict[str, dict[str, float]] = report["topics"]
+    scalars = ("/force", "/stage/position", "/amplifier/drive/monitor")
+    images = ("/camera/image", "/camera/roi")
     return {
         "duration_s": duration_s,
-        "samples_median_ms": max((topics[t]["median_ms"] for t in scalars), default=None),
-        "samples_p95_ms": max((topics[t]["p95_ms"] for t in scalars), default=None),
-        "frames_median_ms": max((topics[t]["median_ms"] for t in images), default=None),
-        "frames_p95_ms": max((topics[t]["p95_ms"] for t in images), default=None),
+        "samples_median_ms": _worst(topics, scalars, "median_ms"),
+        "samples_p95_ms": _worst(topics, scalars, "p95_ms"),
+        "frames_median_ms": _worst(topics, images, "median_ms"),
+        "frames_p95_ms": _worst(topics, images, "p95_ms"),
         "client_topics": topics, "client_errors": report.get("errors", []),
         "cpu_share_recorder_and_live": (live["cpu_s"] - null_cpu * live["wall_s"]) / live["wall_s"],
         "cpu_share_recorder_alone": (alone["cpu_s"] - null_cpu * alone["wall_s"]) / alone["wall_s"],
@@ -144,6 +144,12 @@ def live_latency(duration_s: float, out_dir: Path) -> dict[str, Any]:
         "published_to_server": published, "dropped_by_live_tap": tap_dropped,
         "server_publish_age_median_ms": delays[len(delays) // 2] if delays else None,
     }
+
+
+def _worst(topics: dict[str, dict[str, float]], names: tuple[str, ...], key: str) -> float | None:
+    """The largest `key` among the topics of `names` that reached the client (None if none did)."""
+    values = [topics[t][key] for t in names if t in topics]
+    return max(values) if values else None
 
 
 def bytes_per_second(quick: bool, out_dir: Path) -> dict[str, dict[str, float]]:
@@ -163,7 +169,7 @@ def bytes_per_second(quick: bool, out_dir: Path) -> dict[str, dict[str, float]]:
             if not result.ok:
                 raise RuntimeError(f"{protocol}: {result.reason}")
             spans = [(i.first_time_s, i.last_time_s) for i in RecordingReader(path).topics().values()
-                     if i.first_time_s is not None]
+                     if i.first_time_s is not None and i.last_time_s is not None]
             seconds = max(b for _, b in spans) - min(a for a, _ in spans)
             row[f"{mode}_bytes_per_s"] = path.stat().st_size / seconds
             row["recorded_s"] = seconds

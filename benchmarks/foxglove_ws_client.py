@@ -9,6 +9,7 @@ code), and it can play a client that stops reading (`stall=True`) to show a stal
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import base64
 import json
 import struct
@@ -113,7 +114,9 @@ class FoxgloveClient:
         # A stalled client reads nothing: one queued frame is enough to stop reading from the socket, so the
         # server's sends back up in TCP as they would for a client that hangs.
         queue = 1 if self.stall else 4096
-        async with websockets.connect(self.url, subprotocols=[SUBPROTOCOL], max_size=None,
+        from websockets.typing import Subprotocol
+
+        async with websockets.connect(self.url, subprotocols=[Subprotocol(SUBPROTOCOL)], max_size=None,
                                       max_queue=queue) as ws:
             self._ws = ws
             self._connected.set()
@@ -127,10 +130,8 @@ class FoxgloveClient:
     async def _send(self, ws: Any, text: str) -> None:
         import websockets
 
-        try:
+        with contextlib.suppress(websockets.ConnectionClosed):  # the server went away: nothing to subscribe to
             await ws.send(text)
-        except websockets.ConnectionClosed:
-            pass  # the server went away (the run ended): nothing left to subscribe to
 
     async def _read_until_subscribed(self, ws: Any) -> None:
         async for message in ws:
@@ -158,19 +159,7 @@ class FoxgloveClient:
     def _handle_json(self, ws: Any, body: dict[str, Any]) -> None:
         op = body.get("op")
         if op == "advertise":
-            wanted = []
-            for c in body["channels"]:
-                schema = c.get("schema", "")
-                data = base64.b64decode(schema) if c.get("encoding") == "protobuf" else schema.encode()
-                info = ChannelInfo(c["id"], c["topic"], c["encoding"], c["schemaName"], data, c.get("metadata", {}))
-                self.channels[info.id] = info
-                if self.topics is None or info.topic in self.topics:
-                    wanted.append(info.id)
-            if wanted:
-                subs = [{"id": len(self._subscriptions) + i + 1, "channelId": cid} for i, cid in enumerate(wanted)]
-                for s in subs:
-                    self._subscriptions[s["id"]] = s["channelId"]
-                asyncio.ensure_future(self._send(ws, json.dumps({"op": "subscribe", "subscriptions": subs})))
+            self._advertised(ws, body)
         elif op == "unadvertise":
             for cid in body.get("channelIds", []):
                 self.channels.pop(cid, None)
@@ -179,6 +168,22 @@ class FoxgloveClient:
                 self.services[s["name"]] = s["id"]
         elif op == "serviceCallFailure":
             self._replies[body["callId"]] = ("failure", body.get("message", ""))
+
+    def _advertised(self, ws: Any, body: dict[str, Any]) -> None:
+        """New channels: learn them, subscribe to the wanted ones."""
+        wanted = []
+        for c in body["channels"]:
+            schema = c.get("schema", "")
+            data = base64.b64decode(schema) if c.get("encoding") == "protobuf" else schema.encode()
+            info = ChannelInfo(c["id"], c["topic"], c["encoding"], c["schemaName"], data, c.get("metadata", {}))
+            self.channels[info.id] = info
+            if self.topics is None or info.topic in self.topics:
+                wanted.append(info.id)
+        if wanted:
+            subs = [{"id": len(self._subscriptions) + i + 1, "channelId": cid} for i, cid in enumerate(wanted)]
+            for s in subs:
+                self._subscriptions[s["id"]] = s["channelId"]
+            asyncio.ensure_future(self._send(ws, json.dumps({"op": "subscribe", "subscriptions": subs})))
 
 
 def latency_summary(received: list[Received]) -> dict[str, dict[str, float]]:

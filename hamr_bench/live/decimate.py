@@ -18,7 +18,7 @@ def peak_indices(values: np.ndarray, max_out: int) -> np.ndarray:
     groups = max(1, max_out // 2)
     edges = np.linspace(0, n, groups + 1).astype(np.int64)
     picked = []
-    for start, end in zip(edges[:-1], edges[1:]):
+    for start, end in zip(edges[:-1], edges[1:], strict=True):
         part = values[start:end]
         if part.size == 0:
             continue

@@ -4,8 +4,9 @@ Why not `mcap.writer.Writer`: it builds every record field by field through a st
 a message), which made the writer thread ~28 % of a simulated run's CPU. Here a message record is one
 `struct.pack`, the message index of a chunk is one `numpy` array turned to bytes, and each chunk chooses its own
 compression when it closes (a chunk that is mostly camera-frame bytes the caller marked `stored` is written
-uncompressed, any other is compressed) instead of through a private attribute of another library's class. The recorder and `recover` write with it; the tests read what it writes with
-the `mcap` package, an independent implementation, as well as with `scan.py`.
+uncompressed, any other is compressed) instead of through a private attribute of another library's class. The
+recorder and `recover` write with it; the tests read what it writes with the `mcap` package, an independent
+implementation, as well as with `scan.py`.
 
 Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records as they
 are registered (outside chunks, so a truncated file still describes its channels), Chunks each followed by one

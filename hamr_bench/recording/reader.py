@@ -385,7 +385,8 @@ class RecordingReader:
             return None
         corners = self.scalars(origin_topic)
         log_ns = self._stream(origin_topic).log_times()
-        return {int(t): (int(x), int(y)) for t, x, y in zip(log_ns, corners["x0_px"], corners["y0_px"])}
+        return {int(t): (int(x), int(y)) for t, x, y in zip(log_ns, corners["x0_px"], corners["y0_px"],
+                                                                     strict=True)}
 
     # ------------------------------------------------------------------ helpers
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 import struct
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import Any, Callable
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
@@ -210,12 +210,12 @@ STEP_FIELDS = [
 ]
 
 
-@lru_cache(maxsize=None)
+@cache
 def step_descriptor_set() -> bytes:
     return _message_descriptor_set(STEP_SCHEMA, STEP_FIELDS)
 
 
-@lru_cache(maxsize=None)
+@cache
 def log_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.Log_pb2 import Log
     from mcap_protobuf.schema import build_file_descriptor_set
@@ -223,7 +223,7 @@ def log_descriptor_set() -> bytes:
     return build_file_descriptor_set(Log).SerializeToString()
 
 
-@lru_cache(maxsize=None)
+@cache
 def annotations_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
     from mcap_protobuf.schema import build_file_descriptor_set

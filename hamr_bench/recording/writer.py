@@ -6,8 +6,9 @@ and the file.
 
 Crash safety: the writer thread closes the open chunk, flushes and `os.fsync`s at least every `flush_interval_s`
 of wall time (not rig time: under the virtual clock an hour-long protocol runs in seconds, and durability is about
-the disk, not the simulation), so a SIGKILL loses at most that much plus what the reorder window holds (below). Metadata is written and fsynced before
-`add_metadata` returns. `recover()` turns the output of a killed writer into a finished file.
+the disk, not the simulation), so a SIGKILL loses at most that much plus what the reorder window holds (below).
+Metadata is written and fsynced before `add_metadata` returns. `recover()` turns the output of a killed writer
+into a finished file.
 
 Time: `time_s` is seconds on the rig clock since the run start. Each message carries it in a field, and its MCAP
 log_time is `start_time_ns + time_s` in ns. log_time never decreases within a channel: a sample whose time is

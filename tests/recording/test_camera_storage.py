@@ -42,7 +42,7 @@ def test_roi_keeps_the_region_every_frame_and_a_whole_frame_per_interval(tmp_pat
     regions = list(r.images("/camera/roi"))
     assert len(regions) == len(kept) - 1  # every frame but the one without a marker fix
     with_marker = [f for k, f in enumerate(kept) if k != 17]
-    for region, (t, image, marker) in zip(regions, with_marker):
+    for region, (t, image, marker) in zip(regions, with_marker, strict=True):
         x0, y0 = region.origin_px
         assert (x0, y0) == region_origin(image.shape, marker, 32)
         np.testing.assert_array_equal(region.pixels(), image[y0:y0 + 32, x0:x0 + 32])
@@ -63,7 +63,7 @@ def test_full_and_png_keep_every_frame_losslessly(tmp_path, mode):
     r = RecordingReader(path)
     whole = list(r.images("/camera/image"))
     assert [f.format for f in whole] == ["raw" if mode == "full" else "png"] * 12
-    for frame, (_, image, _) in zip(whole, kept):
+    for frame, (_, image, _) in zip(whole, kept, strict=True):
         np.testing.assert_array_equal(frame.pixels(), image)
     assert "/camera/roi" not in r.topics()
 
@@ -111,7 +111,7 @@ def test_tracking_is_unchanged_by_how_frames_are_kept(tmp_path):
     tracker = MarkerTracker(sigma_px=2.0)
     whole_frames = full.images("/camera/image")
     differences = []
-    for k, (region, frame) in enumerate(zip(regions, whole_frames)):
+    for k, (region, frame) in enumerate(zip(regions, whole_frames, strict=False)):
         x0, y0 = region.origin_px
         guess = (float(live["x_px"][k]), float(live["y_px"][k]))
         from_full = tracker.locate(frame.pixels(), guess_px=guess)

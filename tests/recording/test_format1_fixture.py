@@ -29,7 +29,7 @@ def test_a_format1_recording_reads_back_as_written():
     frames = list(r.images("/camera/image"))
     assert [f.format for f in frames] == ["raw"] * 8 and all(f.origin_px == (0, 0) for f in frames)
     rng = np.random.default_rng(7)
-    for k, frame in zip(i[::50], frames):
+    for k, frame in zip(i[::50], frames, strict=True):
         expected = rng.integers(0, 4, size=(24, 32), dtype=np.uint8)
         expected[10:14, 14 + k // 100:18 + k // 100] = 200
         np.testing.assert_array_equal(frame.pixels(), expected)

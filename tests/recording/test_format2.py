@@ -41,7 +41,7 @@ def test_batches_delivered_late_still_land_in_log_time_order(tmp_path):
         rec.write_event(t, "step", 1, "done", voltage_V=10.0)
     messages = file_order(path)
     times = [log for _, log, _, _ in messages]
-    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert all(b >= a for a, b in zip(times, times[1:], strict=False))
     r = RecordingReader(path)
     assert r.metadata()["run_end"]["late_by_topic"] == "{}"
     assert r.metadata()["recording"]["format_version"] == "2"
@@ -58,7 +58,7 @@ def test_a_message_later_than_the_window_is_logged_late_counted_and_keeps_its_ti
         rec.write_scalar("/b", 4.0, y_m=1.0)  # 3 s behind what the file holds
         rec.write_scalar("/b", 7.5, y_m=2.0)  # after everything: in order
     times = [log for _, log, _, _ in file_order(path)]
-    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert all(b >= a for a, b in zip(times, times[1:], strict=False))
     r = RecordingReader(path)
     assert r.metadata()["run_end"]["late_by_topic"] == '{"/b": 1}'
     b = r.scalars("/b")
