@@ -172,7 +172,7 @@ class PlateState:
 class PlateChain:
     """One plate's voltage -> its effective (strain-producing) voltage, in time order on a grid of step h."""
 
-    def __init__(self, h_s: float, pzt_thickness_m: float, hysteresis: tuple[EverettTable, float] | None,
+    def __init__(self, h_s: float, pzt_thickness_m: float, hysteresis: HysteresisMap | None,
                  creep: PronyCreep | None, gain: FieldGain | None, supply_factor: float) -> None:
         self.thickness = pzt_thickness_m
         self.supply = supply_factor
@@ -181,7 +181,7 @@ class PlateChain:
         self.creep = creep
         self.lags = [FirstOrderLag(t, h_s) for t in creep.taus_s] if creep else []
         self.state = PlateState(PreisachState(), np.zeros(len(self.lags)), 0.0)
-        self._op = PreisachOperator(hysteresis[0], self.state.preisach) if hysteresis else None
+        self._op = PreisachOperator(hysteresis.table, self.state.preisach) if hysteresis else None
 
     def snapshot(self) -> PlateState:
         return self.state.copy()
@@ -197,9 +197,8 @@ class PlateChain:
             p = p * self.supply
         q = p
         if self._op is not None:
-            eta = self.hyst[1]  # type: ignore[index]
             x = np.clip(p / FULL_SCALE_V, 0.0, 1.0)
-            q = FULL_SCALE_V * ((1.0 - eta) * x + eta * self._op.run(x) / self._op.everett.total)
+            q = FULL_SCALE_V * self.hyst.effective(x, self._op.run(x) / self._op.everett.total)  # type: ignore
             # beyond the Preisach range (a negative transient, above full scale) the plate is linear
             q = q + (p - FULL_SCALE_V * x)
         if self.creep is not None:
@@ -252,7 +251,7 @@ class DriveChain:
 
 
 # ------------------------------------------------------------------ shapes and their defaults
-HYSTERESIS_SHAPE = {"r0": 0.4, "kappa": 0.0}
+HYSTERESIS_SHAPE = {"r0": 1.0, "kappa": 0.0}
 CREEP_SHAPE = {"tau1_s": 0.05, "tau2_s": 1.0, "tau3_s": 20.0, "weight1": 0.3, "weight2": 0.35, "weight3": 0.35}
 D31_SHAPE = {"form": 0.0, "switch_field_V_per_um": 0.8, "width_V_per_um": 0.3, "split": 0.5, "low_tail": 0.15,
              "high_tail": 0.1}
@@ -264,26 +263,68 @@ def _unknown(shape: dict[str, float], known: dict[str, float], name: str) -> Non
         raise ValueError(f"{name} shape: unknown parameter {extra[0]!r} (known: {', '.join(known)})")
 
 
-def hysteresis_setup(strength: float, shape: dict[str, float]) -> tuple[EverettTable, float]:
-    """The Everett table and the hysteretic fraction eta for a strength (largest up/down gap of the net drive
-    at full 250 V cycles, over the net span 2 x 250 V)."""
+@dataclass(frozen=True)
+class HysteresisMap:
+    """A plate's hysteresis: the Preisach output mixed with the reversible part, S = (1 - eta) x + eta P[x], then
+    read back through the inverse of S's first rise from 0 V (a static map): every cycle from 0 V peaks on the
+    nominal line, so the dwell levels stay where the nominal model puts them and the loop shows on the ramps (an
+    amplitude-dependent gain is the field_dependent_d31 effect's). The inverse is tabulated."""
+
+    table: EverettTable
+    eta: float
+    grid: np.ndarray
+    rise: np.ndarray
+
+    @classmethod
+    def build(cls, table: EverettTable, eta: float, points: int = 2049) -> HysteresisMap:
+        x = np.linspace(0.0, 1.0, points)
+        rise = (1.0 - eta) * x + eta * table(x, np.zeros_like(x)) / table.total
+        return cls(table, eta, x, rise)
+
+    def effective(self, x: np.ndarray, preisach_01: np.ndarray) -> np.ndarray:
+        s = (1.0 - self.eta) * x + self.eta * preisach_01
+        return np.interp(s, self.rise, self.grid)
+
+
+def hysteresis_setup(strength: float, shape: dict[str, float]) -> HysteresisMap:
+    """The plate map for a strength (largest gap between the rising and falling net drive of full 250 V cycles at a
+    250 V bias, over the net span 2 x 250 V): eta found by bisection (the gap grows with eta)."""
     _unknown(shape, HYSTERESIS_SHAPE, "hysteresis")
     s = {**HYSTERESIS_SHAPE, **shape}
     table = EverettTable(PreisachDensity(s["r0"], s["kappa"]))
-    gap = full_cycle_gap(table)
-    if not 0 < strength <= gap:
-        raise ValueError(f"hysteresis strength {strength} must be in (0, {gap:.3g}] for this shape")
-    return table, strength / gap
+    top = full_cycle_gap(HysteresisMap.build(table, 0.999))
+    if not 0 < strength <= top:
+        raise ValueError(f"hysteresis strength {strength} must be in (0, {top:.3g}] for this shape")
+    # Illinois (regula falsi) on gap(eta) - strength: the gap grows smoothly with eta
+    lo, hi, g_lo, g_hi = 0.0, 0.999, -strength, top - strength
+    side = 0
+    mid = hi
+    for _ in range(60):
+        mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        g = full_cycle_gap(HysteresisMap.build(table, mid), points=801) - strength
+        if abs(g) < 1e-7 * strength:
+            break
+        if g < 0:
+            lo, g_lo = mid, g
+            g_hi = g_hi / 2 if side == -1 else g_hi
+            side = -1
+        else:
+            hi, g_hi = mid, g
+            g_lo = g_lo / 2 if side == 1 else g_lo
+            side = 1
+    return HysteresisMap.build(table, mid)
 
 
-def full_cycle_gap(table: EverettTable, points: int = 2001) -> float:
-    """Largest gap between the rising and falling net drive (eta = 1) over a 0 -> 250 -> 0 V drive cycle at a
-    250 V bias, over the net span (the bias charged first, then the cycle), as a fraction."""
-    bottom, top = PreisachOperator(table), PreisachOperator(table)
-    top.run(np.linspace(0.0, 1.0, points))                      # the bias comes up with the drive at 0
+def full_cycle_gap(hmap: HysteresisMap, points: int = 2001) -> float:
+    """Largest gap between the rising and falling net drive over a 0 -> 250 -> 0 V drive cycle at a 250 V bias
+    (the bias charged first, then the cycle), over the net span, as a fraction."""
+    bottom, top = PreisachOperator(hmap.table), PreisachOperator(hmap.table)
     x = np.linspace(0.0, 1.0, points)
-    up = (bottom.run(x) - top.run(1.0 - x)) / table.total
-    down = (bottom.run(x[::-1]) - top.run(1.0 - x[::-1]))[::-1] / table.total
+    total = hmap.table.total
+    top.run(x)                                                  # the bias comes up with the drive at 0
+    up = hmap.effective(x, bottom.run(x) / total) - hmap.effective(1.0 - x, top.run(1.0 - x) / total)
+    down = (hmap.effective(x[::-1], bottom.run(x[::-1]) / total)
+            - hmap.effective(x, top.run(x) / total))[::-1]
     return float(np.max(np.abs(down - up)) / 2.0)
 
 
