@@ -135,26 +135,38 @@ class SecondOrderMode:
     def from_modal(self, xi: np.ndarray | complex) -> tuple[np.ndarray, np.ndarray]:
         return 2.0 * np.real(xi), 2.0 * np.real(self._lam * np.asarray(xi))  # type: ignore[attr-defined]
 
-    def run(self, x0: float, v0: float, target: np.ndarray) -> np.ndarray:
-        """Modal states xi at target[1:] grid points, starting from (x0, v0) at the time of target[0]."""
+    def run(self, x0: float, v0: float, target: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
+        """Modal states xi at target[1:] grid points, starting from (x0, v0) at the time of target[0]. `offset`
+        (one per step, held over it) adds to the target: a damper tied to a moving base contributes
+        2 zeta v_base / omega, constant over a step where the base moves linearly."""
         u = np.asarray(target, dtype=float)
         drive = self._beta * (self._g0 * u[:-1] + self._g1 * u[1:])  # type: ignore[attr-defined]
+        if offset is not None:
+            drive = drive + self._beta * (self._g0 + self._g1) * np.asarray(offset)  # type: ignore[attr-defined]
         return first_order_recursion(self._E, drive, self.to_modal(x0, v0))  # type: ignore[attr-defined]
 
-    def within_step(self, xi0: np.ndarray, u0: np.ndarray, u1: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
+    def within_step(self, xi0: np.ndarray, u0: np.ndarray, u1: np.ndarray, tau_s: np.ndarray,
+                    offset: np.ndarray | float = 0.0) -> np.ndarray:
         """x at time tau_s (0 <= tau_s <= h) into steps that start in modal state xi0 with target u0 -> u1."""
         e, g0, g1 = self._step_gains(np.asarray(tau_s, dtype=float))
         slope_part = self._beta * (g1 * self.h_s)  # type: ignore[attr-defined]
-        # the target in the step is u0 + (u1 - u0) tau / h: weights for u0 and for the slope
-        xi = e * xi0 + self._beta * (g0 + g1) * u0 + slope_part * (u1 - u0) / self.h_s  # type: ignore[attr-defined]
+        # the target in the step is u0 + (u1 - u0) tau / h: weights for u0 (and the held offset) and for the slope
+        xi = (e * xi0 + self._beta * (g0 + g1) * (u0 + offset)  # type: ignore[attr-defined]
+              + slope_part * (u1 - u0) / self.h_s)
         return 2.0 * np.real(xi)
 
-    def step_integral(self, xi0: np.ndarray, u0: np.ndarray, u1: np.ndarray) -> np.ndarray:
-        """The integral of x over whole steps (start state xi0, target u0 -> u1), for exact averages."""
+    def partial_integral(self, xi0: np.ndarray, u0: np.ndarray, u1: np.ndarray, tau_s: np.ndarray | float,
+                         offset: np.ndarray | float = 0.0) -> np.ndarray:
+        """The integral of x from a step's start to tau_s into it (closed form), for exact averages."""
         lam, h, beta = self._lam, self.h_s, self._beta  # type: ignore[attr-defined]
-        e = self._E  # type: ignore[attr-defined]
-        j0 = (e - 1.0) / lam                                         # int_0^h e^(lam t) dt
-        k0 = (j0 - h) / lam                                          # int_0^h (e^(lam t) - 1) / lam dt
-        k1 = (j0 - h - lam * h * h / 2.0) / lam ** 2                 # int_0^h (e^(lam t) - 1 - lam t) / lam^2 dt
+        tau = np.asarray(tau_s, dtype=float)
+        j0 = np.expm1(lam * tau) / lam                               # int_0^tau e^(lam t) dt
+        k0 = (j0 - tau) / lam                                        # int_0^tau (e^(lam t) - 1) / lam dt
+        k1 = (j0 - tau - lam * tau * tau / 2.0) / lam ** 2           # int_0^tau (e^(lam t) - 1 - lam t) / lam^2 dt
         slope = (np.asarray(u1) - np.asarray(u0)) / h
-        return 2.0 * np.real(xi0 * j0 + beta * (np.asarray(u0) * k0 + slope * k1))
+        return 2.0 * np.real(xi0 * j0 + beta * ((np.asarray(u0) + offset) * k0 + slope * k1))
+
+    def step_integral(self, xi0: np.ndarray, u0: np.ndarray, u1: np.ndarray,
+                      offset: np.ndarray | float = 0.0) -> np.ndarray:
+        """The integral of x over whole steps (start state xi0, target u0 -> u1)."""
+        return self.partial_integral(xi0, u0, u1, self.h_s, offset)

@@ -64,6 +64,8 @@ class ModeSpec:
                          / (self.mass_kg + self.sensor_mass_kg)) / (2 * math.pi)
 
 
+# "contact" holds the contact mode's target as the sensor's compression N / k_s; "xi" is the modal state of the
+# row's mode: the absolute position in the free mode, the compression x - x_s in the contact mode.
 _COLUMNS = {"x_s": float, "x": float, "u": float, "free": float, "contact": float, "mode": np.int8,
             "xi": complex, "cum_force": float, "drift": float}
 
@@ -140,12 +142,14 @@ class BenchPlant:
         x_s = self.surface.run(t)
         free = self.statics.free_position_m(u, 0, 1)
         force = self.statics.contact_force_N(u, x_s, np.zeros(1), 0, 1, np.ones(1, bool))
-        contact = x_s + force / self.k_sensor
+        compression = force / self.k_sensor
         mode = 1 if free[0] > x_s[0] else 0
-        x0 = float(contact[0] if mode else free[0])
+        x0 = float(x_s[0] + compression[0] if mode else free[0])
+        state0 = float(compression[0]) if mode else x0
         drift = self.drift.run(0, 1, np.zeros(1)) if self.drift else np.zeros(1)
-        self._append(x_s=x_s, x=np.array([x0]), u=u, free=free, contact=contact, mode=np.array([mode], np.int8),
-                     xi=np.array([self._mode(mode).to_modal(x0, 0.0)]), cum_force=np.zeros(1), drift=drift)
+        self._append(x_s=x_s, x=np.array([x0]), u=u, free=free, contact=compression,
+                     mode=np.array([mode], np.int8), xi=np.array([self._mode(mode).to_modal(state0, 0.0)]),
+                     cum_force=np.zeros(1), drift=drift)
         # the starting point stands for the rig before any command: a change at the start time restarts after it
         self.snapshots.append((0, self._states()))
 
@@ -209,9 +213,9 @@ class BenchPlant:
         force = np.zeros_like(u)
         if np.any(near) or self.statics.needs_history:
             force = self.statics.contact_force_N(u, x_s, dx_s, k0 + 1, stop + 1, near)
-        # far from the surface the contact target is only a guide back out: the linear spring estimate
-        contact = np.where(near, x_s + force / self.k_sensor,
-                           x_s - self.spec.stiffness_N_per_m * (x_s - free) / self.k_sensor)
+        # the contact mode's target: the sensor's compression (far from the surface only a guide back out: the
+        # linear spring estimate, negative)
+        contact = np.where(near, force, -self.spec.stiffness_N_per_m * (x_s - free)) / self.k_sensor
         x, mode, xi = self._integrate(x_s, free, contact)
         cum = self._force_integral(x_s, free, contact, mode, xi)
         drift = self.drift.run(k0 + 1, idx.size, t - self.t0) if self.drift else np.zeros(idx.size)
@@ -227,76 +231,82 @@ class BenchPlant:
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """x at the new points, and (mode, xi) for the previous last point and every new point.
 
+        The free mode works in the plant's position x; the contact mode in the sensor's compression y = x - x_s,
+        in the frame of the sensor's base: a moving stage then enters only through its acceleration, a force of
+        (plant + sensor mass) x (stage acceleration), ~20 uN at the stage's 20 mm/s^2, which is left out.
         Touchdown: the free plant reaches the surface (x > x_s) where the quasi-static solution presses (target
-        beyond the surface); the crossing is found on the grid, so the plant is put back on the surface there and
-        shares momentum with the sensor's moving mass (which moves with the stage). Lift-off: the quasi-static
-        contact force falls to 0 (the plant would leave the sensor); the state carries on. Contact therefore never
-        bounces, which a light contact on a real sensor may; a bounce of the sensor's element is left out."""
+        compression > 0); the crossing is found on the grid, so the plant is put on the surface there and shares
+        momentum with the sensor's moving mass (which moves with the stage). Lift-off: the quasi-static force falls
+        to 0; the plant leaves with its own velocity. Contact therefore never bounces, which a light contact on a
+        real sensor may."""
         n = x_s.size
         xs_all = np.concatenate([self.cols["x_s"][-1:], x_s])
+        v_s = np.diff(xs_all) / self.h                      # the surface's velocity over each step
         targets = (np.concatenate([self.cols["free"][-1:], free]),
                    np.concatenate([self.cols["contact"][-1:], contact]))
-        presses = targets[1] > xs_all          # the quasi-static solution is in contact
+        presses = targets[1] > 0.0                          # the quasi-static solution is in contact
         mode_out = np.empty(n + 1, np.int8)
         xi_out = np.empty(n + 1, complex)
         x_out = np.empty(n)
         if not self.dynamics:
             flags = presses[1:].astype(np.int8)
-            x_out[:] = np.where(flags == 1, contact, free)
+            x_out[:] = np.where(flags == 1, x_s + contact, free)
             mode_out[0] = flags[0]
             mode_out[1:] = flags
             xi_out[:] = 0.0
             return x_out, mode_out, xi_out
         mode = int(self.cols["mode"][-1])
-        x = float(self.cols["x"][-1])
-        v = float(self._mode(mode).from_modal(complex(self.cols["xi"][-1]))[1])
+        q, dq = self._mode(mode).from_modal(complex(self.cols["xi"][-1]))   # the mode's own coordinate
+        q, dq = float(q), float(dq)
         i = 0
         switches = 0
         while i < n:
             j = min(n, i + _CHUNK_STEPS)
             m = self._mode(mode)
-            xi0 = m.to_modal(x, v)
-            xi = m.run(x, v, targets[mode][i:j + 1])          # states at points i+1 .. j
+            xi0 = m.to_modal(q, dq)
+            xi = m.run(q, dq, targets[mode][i:j + 1])        # states at points i+1 .. j
             pos, vel = m.from_modal(xi)
             if mode:
                 wrong = np.flatnonzero(~presses[i + 1:j + 1])
+                absolute = pos + xs_all[i + 1:j + 1]
             else:
                 wrong = np.flatnonzero((pos > xs_all[i + 1:j + 1]) & presses[i + 1:j + 1])
+                absolute = pos
             switch = wrong.size > 0 and switches < _MAX_SWITCHES_PER_BLOCK
             stop = i + 1 + int(wrong[0]) if switch else j
             count = stop - i
             mode_out[i:stop] = mode
             xi_out[i] = xi0
             xi_out[i + 1:stop] = xi[:count - 1]
-            x, v = float(pos[count - 1]), float(vel[count - 1])
+            x_out[i:stop] = absolute[:count]
+            q, dq = float(pos[count - 1]), float(vel[count - 1])
             if switch:
                 switches += 1
+                surface_v = float(v_s[stop - 1])
+                if mode:      # lift-off: the plant's own coordinate and velocity
+                    q, dq = float(absolute[count - 1]), dq + surface_v
+                else:         # touchdown: on the surface, momentum shared with the sensor's moving mass
+                    q, dq = 0.0, self.impact_ratio * (dq - surface_v)
+                    x_out[stop - 1] = xs_all[stop]
                 mode = 1 - mode
-                if mode:   # touchdown: on the surface, momentum shared with the sensor moving with the stage
-                    x = float(xs_all[stop])
-                    v_sensor = float(xs_all[stop] - xs_all[stop - 1]) / self.h
-                    v = self.impact_ratio * v + (1.0 - self.impact_ratio) * v_sensor
-            x_out[i:stop] = pos[:count]
-            x_out[stop - 1] = x
             i = stop
         mode_out[n] = mode
-        xi_out[n] = self._mode(mode).to_modal(x, v)
+        xi_out[n] = self._mode(mode).to_modal(q, dq)
         return x_out, mode_out, xi_out
 
     def _force_integral(self, x_s: np.ndarray, free: np.ndarray, contact: np.ndarray, mode: np.ndarray,
                         xi: np.ndarray) -> np.ndarray:
         """Cumulative integral of the sensed force at the new points (steps from the previous last point on)."""
-        xs_all = np.concatenate([self.cols["x_s"][-1:], x_s])
         steps = np.zeros(x_s.size)
         in_contact = mode[:-1] == 1
         if np.any(in_contact):
             sel = np.flatnonzero(in_contact)
             tgt = np.concatenate([self.cols["contact"][-1:], contact])
             if self.dynamics:
-                integral_x = self.contact_mode.step_integral(xi[sel], tgt[sel], tgt[sel + 1])
+                integral = self.contact_mode.step_integral(xi[sel], tgt[sel], tgt[sel + 1])
             else:
-                integral_x = 0.5 * self.h * (tgt[sel] + tgt[sel + 1])
-            steps[sel] = self.k_sensor * (integral_x - 0.5 * self.h * (xs_all[sel] + xs_all[sel + 1]))
+                integral = 0.5 * self.h * (tgt[sel] + tgt[sel + 1])
+            steps[sel] = self.k_sensor * integral
         return float(self.cols["cum_force"][-1]) + np.cumsum(steps)
 
     def _trim(self) -> None:
@@ -330,16 +340,24 @@ class BenchPlant:
         mode = st["mode"][row]
         first_mode = int(mode.flat[0]) if mode.size else 0
         if mode.size and not np.any(mode != first_mode):
-            tgt = st["contact"] if first_mode else st["free"]
-            return self._mode(first_mode).within_step(st["xi"][row], tgt[row], tgt[row + 1], tau)
+            return self._within(first_mode, row, tau)
         out = np.empty(row.shape)
         for m_id in (0, 1):
             sel = mode == m_id
             if np.any(sel):
-                r = row[sel]
-                tgt = st["contact"] if m_id else st["free"]
-                out[sel] = self._mode(m_id).within_step(st["xi"][r], tgt[r], tgt[r + 1], tau[sel])
+                out[sel] = self._within(m_id, row[sel], tau[sel])
         return out
+
+    def _within(self, mode: int, row: np.ndarray, tau: np.ndarray, compression: bool = False) -> np.ndarray:
+        """The position (or, in contact with `compression`, the sensor's compression) at tau into each row."""
+        st = self._store
+        if mode:
+            y = self.contact_mode.within_step(st["xi"][row], st["contact"][row], st["contact"][row + 1], tau)
+            if compression:
+                return y
+            x_s = st["x_s"][row] + (st["x_s"][row + 1] - st["x_s"][row]) * tau / self.h
+            return x_s + y
+        return self.free_mode.within_step(st["xi"][row], st["free"][row], st["free"][row + 1], tau)
 
     def positions_m(self, times_s: np.ndarray) -> np.ndarray:
         """The plant's position x at each time (exact between grid points)."""
@@ -350,38 +368,46 @@ class BenchPlant:
         """The force the sensor's element carries at each time (instantaneous, drift included)."""
         row, tau = self._locate(times_s)
         st = self._store
-        w = tau * (1.0 / self.h)
         contact = st["mode"][row] == 1
         force = np.zeros(row.shape)
         if np.any(contact):
-            r, wc = row[contact], w[contact]
-            x = self._positions(r, tau[contact])
-            x_s = st["x_s"][r] + (st["x_s"][r + 1] - st["x_s"][r]) * wc
-            force[contact] = np.maximum(self.k_sensor * (x - x_s), 0.0)
+            r, t = row[contact], tau[contact]
+            if self.dynamics:
+                y = self._within(1, r, t, compression=True)
+            else:
+                y = (st["x"][r] - st["x_s"][r]) + ((st["x"][r + 1] - st["x_s"][r + 1])
+                                                   - (st["x"][r] - st["x_s"][r])) * t / self.h
+            force[contact] = np.maximum(self.k_sensor * y, 0.0)
         if self.drift is not None:
             d = st["drift"]
-            force += d[row] + (d[row + 1] - d[row]) * w
+            force += d[row] + (d[row + 1] - d[row]) * (tau / self.h)
         return force
 
     def mean_force_N(self, end_s: float, window_s: float) -> float:
         """The average sensed force over [end - window, end] (drift included): what a load cell that integrates
-        over its conversion period reports. (Scalar arithmetic: a serial load cell asks once per reading.)"""
-        if end_s >= self.t0 + self.h * self.last:
-            self.ensure(end_s)
-        start_s = end_s - window_s
-        cum, drift = self._store["cum_force"], self._store["drift"]
-        total = []
-        drift_sum = 0.0
-        for t in (start_s, end_s):
-            f = (t - self.t0) / self.h
-            k = math.floor(f)
-            r = k - self.first
-            if r < 0:
-                raise ValueError(f"simulated bench: t={t:g} s is older than the kept history")
-            w = f - k
-            total.append(cum[r] + (cum[r + 1] - cum[r]) * w)
-            drift_sum += drift[r] + (drift[r + 1] - drift[r]) * w
-        return float((total[1] - total[0]) / window_s + 0.5 * drift_sum)
+        over its conversion period reports, from the closed-form integral of each step."""
+        row, tau = self._locate(np.array([end_s - window_s, end_s]))
+        st = self._store
+        cum = st["cum_force"][row].copy()
+        contact = st["mode"][row] == 1
+        if np.any(contact):
+            r, t = row[contact], tau[contact]
+            if self.dynamics:
+                integral = self.contact_mode.partial_integral(st["xi"][r], st["contact"][r], st["contact"][r + 1], t)
+            else:
+                y0, y1 = st["contact"][r], st["contact"][r + 1]
+                integral = t * y0 + (y1 - y0) * t * t / (2.0 * self.h)
+            cum[contact] += self.k_sensor * integral
+        mean = float((cum[1] - cum[0]) / window_s)
+        if self.drift is not None:   # linear between grid points: the trapezoid of its samples in the window
+            d = st["drift"]
+            w = tau / self.h
+            ends = d[row] + (d[row + 1] - d[row]) * w
+            inner = d[row[0] + 1:row[1] + 1]
+            times = np.concatenate([[0.0], self.h * (np.arange(1, inner.size + 1) - w[0]), [window_s]])
+            values = np.concatenate([[ends[0]], inner, [ends[1]]])
+            mean += float(np.trapezoid(values, times) / window_s)
+        return mean
 
     def drive_state(self, times_s: np.ndarray) -> np.ndarray:
         """The free deflection u at each time (linear between grid points): for diagnostics and tests."""
