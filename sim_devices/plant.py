@@ -22,7 +22,9 @@ Inputs change when the runner acts (an analog-output write, a stage command): th
 which forgets every point at or after that moment (restoring the component states saved at the start of the block
 that holds it); the next question recomputes. Between changes the plant computes ahead of the latest question by
 an adaptive horizon (doubling while nothing changes, 20 ms -> 0.5 s), so blocks are long in dwells and short
-while the runner steps the stage. Results depend on the inputs alone, not on how the questions were split.
+while the runner steps the stage. Results depend on the inputs alone, not on how the questions were split (up to
+rounding: block-wise sums round differently); the same run always splits the same way, so its recordings are
+bit-identical run to run.
 """
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ class DriftProcess:
         self.a = math.exp(-h_s / model.reversion_s)
         self.noise_scale = model.rate_N_per_sqrt_s * math.sqrt(model.reversion_s * (1.0 - self.a ** 2) / 2.0)
         self.wander = 0.0     # w at the last index computed
-        self.index = 0        # the grid index of `wander`
+        self.index = -1       # the grid index of `wander` (none yet)
 
     def snapshot(self) -> tuple[float, int]:
         return self.wander, self.index
