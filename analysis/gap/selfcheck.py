@@ -110,14 +110,17 @@ def observable(name: str, strength: float, generator: bool) -> float:
     from hamr_bench.model import actuator_preset
 
     from analysis.gap import library as lib
-    from sim_devices import bench_effects as gen
+    from sim_devices import scenarios
 
     a = actuator_preset(2, "effective")
     nominal = float(act.tip_force_N(a, 250.0, 250.0, 0.0))
+    if generator:   # the bench's forms (default shapes), through the scenario module's observables
+        change = scenarios.observables(name, strength, {})["blocked_force_change_250V"]
+        return -change if name == "width_loss" else change
     if name == "width_loss":
-        e = (gen.WidthLoss if generator else lib.EdgeLoss)(strength=strength)
+        e = lib.EdgeLoss(strength=strength)
         return 1.0 - float(act.tip_force_N(e.actuator_params(a), 250.0, 250.0, 0.0)) / nominal
-    e = (gen.TanhFieldD31 if generator else lib.LinearFieldD31)(strength=strength)
+    e = lib.LinearFieldD31(strength=strength)
     return float(act.tip_force_N(a, 250.0, 250.0, 0.0, lambda v: e.plate_voltage(v, a))) / nominal - 1.0
 
 

