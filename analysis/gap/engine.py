@@ -14,6 +14,7 @@ Strength 0 of every candidate is the nominal model exactly (the same path, the o
 from __future__ import annotations
 
 import dataclasses
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +30,9 @@ from hamr_bench.model.effects import Effect
 
 FULL_SCALE_V = 250.0
 DENSE_DT_S = 1e-3
+MEMO_ARRAYS = 10
+REFERENCE_ACTUATOR = actuator_preset(2, "effective")
+MEMO_ITEMS = 400
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,7 @@ def _apply_fit(a: ActuatorParams, d: DesignParams | None, run: Any, fit: dict
     entry = acts.get(str(run.layers)) or acts.get(run.layers)
     if entry:
         names = {"E_p": "pzt_modulus_Pa", "d31": "d31_m_per_V", "t_p": "pzt_thickness_m", "length": "length_m",
-                 "width": "width_nom_m"}
+                 "width": "width_nom_m", "t_c": "cf_thickness_m"}
         a = dataclasses.replace(a, **{f: _value(entry[k]) for k, f in names.items() if k in entry})
     designs = fit.get("designs", {}) or {}
     entry = (designs.get(str(run.design)) or designs.get(run.design)) if d is not None else None
@@ -150,7 +154,8 @@ class RunEngine:
         self.dense_t = np.arange(t_first - DENSE_DT_S, t_last + 0.1, DENSE_DT_S)
         self.dense_vb = _zoh(run.bias_cmd[0], run.bias_cmd[1], self.dense_t)
         self.dense_vd = _zoh(run.drive_cmd[0], run.drive_cmd[1], self.dense_t)
-        self._cache: dict[Any, Any] = {}
+        self._cache: OrderedDict[Any, Any] = OrderedDict()
+        self._big_keys: list[Any] = []
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
         """Per sample time, its weight in the row's mean of cycle means."""
@@ -163,9 +168,7 @@ class RunEngine:
         return 1.0 / counts[inv] / n_cyc[row_of]
 
     def _row_mean(self, values: np.ndarray, row_of: np.ndarray, w: np.ndarray) -> np.ndarray:
-        out = np.zeros(self.n_rows)
-        np.add.at(out, row_of, np.nan_to_num(values) * w)
-        return out
+        return np.bincount(row_of, weights=values * w, minlength=self.n_rows)
 
     def row_means(self, values: np.ndarray) -> np.ndarray:
         """Mean of cycle means per row of any per-sample quantity at `self.t`."""
@@ -173,11 +176,22 @@ class RunEngine:
 
     # --- the drive path -----------------------------------------------------------------------------------
     def _memo(self, key: Any, make: Any) -> Any:
+        """Least-recently-used memo: arrays on the dense grid (up to MEMO_ARRAYS of them: a native run's grid is
+        ~10^5 samples) and small values (parameters, Powertrains) apart."""
         v = self._cache.get(key)
-        if v is None:
-            if len(self._cache) > 48:
-                self._cache.clear()
-            v = self._cache[key] = make()
+        if v is not None:
+            self._cache.move_to_end(key)
+            return v
+        v = self._cache[key] = make()
+        big = isinstance(v, np.ndarray) and v.size > 1000
+        if big:
+            self._big_keys.append(key)
+        while len(self._big_keys) > MEMO_ARRAYS:
+            self._cache.pop(self._big_keys.pop(0), None)
+        while len(self._cache) > MEMO_ITEMS:
+            old, _ = self._cache.popitem(last=False)
+            if old in self._big_keys:
+                self._big_keys.remove(old)
         return v
 
     def _net_drive(self, d31: EffectValue | None, t_p: float) -> np.ndarray:
@@ -186,10 +200,16 @@ class RunEngine:
         if d31 is None or d31.strength == 0:
             return 2.0 * vd - vb
         q = d31.shape("curvature", "field_dependent_d31")
-        return op.plate_map(vd, t_p, d31.strength, q) - op.plate_map(vb - vd, t_p, d31.strength, q)
+        ref = self.actuator.pzt_thickness_m
+        return (op.plate_map(vd, t_p, d31.strength, q, ref) - op.plate_map(vb - vd, t_p, d31.strength, q, ref))
 
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """The effective net drive on the dense grid after d31(E), hysteresis and creep (V)."""
+        key = ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
+                                  if FAMILIES[n].kind == "drive")
+        return self._memo(key, lambda: self._effective_drive(effects, t_p))
+
+    def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         d31 = effects.get("field_dependent_d31")
         hy = effects.get("hysteresis")
         cr = effects.get("creep")
@@ -214,6 +234,10 @@ class RunEngine:
 
     # --- parameters ---------------------------------------------------------------------------------------
     def actuator_for(self, effects: Effects, gains: tuple[float, float]) -> ActuatorParams:
+        key = ("a", gains) + tuple((n, v.strength) for n, v in sorted(effects.items()) if FAMILIES[n].kind == "params")
+        return self._memo(key, lambda: self._actuator_for(effects, gains))
+
+    def _actuator_for(self, effects: Effects, gains: tuple[float, float]) -> ActuatorParams:
         a = self.actuator
         for name, value in effects.items():
             if FAMILIES[name].kind == "params" and value.strength != 0:
@@ -235,11 +259,15 @@ class RunEngine:
         return pos - ref
 
     def _springs(self, effects: Effects) -> list[tuple[float, float, float]]:
+        """(C, beta, rho) of the active series springs: the sensor's strength is its compliance, the base's the
+        blocked-force loss it causes on the reference actuator at 250 V (`base_compliance_m_per_N`)."""
         out = []
         for name in ("base_compliance", "sensor_compliance"):
             e = effects.get(name)
             if e is not None and e.strength != 0:
-                out.append((e.strength, e.shape("exponent", name), e.shape("pull_ratio", name)))
+                beta = e.shape("exponent", name)
+                c = base_compliance_m_per_N(e.strength, beta) if name == "base_compliance" else e.strength
+                out.append((c, beta, e.shape("pull_ratio", name)))
         return out
 
     # --- the prediction -----------------------------------------------------------------------------------
@@ -252,7 +280,7 @@ class RunEngine:
         b = backlash.strength if backlash is not None else 0.0
         out = np.zeros(t.shape)
         if self.run.fixture == "actuator":
-            c, k = act.force_per_volt(a), act.stiffness_N_per_m(a)
+            c, k = self._memo(("ck", a), lambda: (act.force_per_volt(a), act.stiffness_N_per_m(a)))
             d = ~is_force
             out[d] = c / k * y[d]
             if is_force.any():
@@ -269,7 +297,8 @@ class RunEngine:
         if bias is not None and bias.strength != 0 and d is not None:
             d = dataclasses.replace(d, bias_m=d.bias_m + bias.strength)
         base = effects.get("base_compliance")
-        extra = [_SerialSpring(strength=base.strength)] if base is not None and base.strength != 0 else []
+        extra = [_SerialSpring(strength=base_compliance_m_per_N(base.strength, 1.0))] \
+            if base is not None and base.strength != 0 else []
         key = ("pt", a, d, tuple(e.strength for e in extra))
         p: Powertrain = self._memo(key, lambda: Powertrain(a, d, extra))
         out = np.zeros(te.shape)
@@ -323,19 +352,28 @@ class RunEngine:
         out[~self.is_force_row] = 0.0
         return out
 
-    def drift_wander(self, coefs: np.ndarray, log10_tau_s: float, knot_s: float = 4.0) -> tuple[float, int]:
-        """(sum of squared baseline changes from the first force sample, number of force samples) for these
-        baseline coefficients: the drift's wander."""
+    def drift_wander(self, coefs: np.ndarray, log10_tau_s: float, knot_s: float = 4.0) -> tuple[float, float]:
+        """(sum of squared changes of the fitted baseline between points `knot_s` apart, time they span) over the
+        run's force samples: a random walk of rate q has E[sum] = q^2 x span, so q^2 = sum / span."""
         if not self.eval_is_force.any() or coefs.size == 0:
-            return 0.0, 0
-        tf = np.sort(self.t[self.eval_is_force])
-        t0, t1 = float(tf[0]), float(tf[-1])
-        spline = op.spline_basis(tf, t0, t1, max(knot_s, (t1 - t0) / 8.0))
-        b = np.column_stack([spline, op.warm_up(tf - t0, 10.0 ** log10_tau_s)]) @ coefs
-        return float(np.sum((b - b[0]) ** 2)), int(tf.size)
+            return 0.0, 0.0
+        tf = self.t[self.eval_is_force]
+        t0, t1 = float(tf.min()), float(tf.max())
+        grid = np.linspace(t0, t1, max(2, int(round((t1 - t0) / knot_s)) + 1))
+        spline = op.spline_basis(grid, t0, t1, max(knot_s, (t1 - t0) / 8.0))
+        b = np.column_stack([spline, op.warm_up(grid - t0, 10.0 ** log10_tau_s)]) @ coefs
+        return float(np.sum(np.diff(b) ** 2)), t1 - t0
 
     def has_contact(self) -> bool:
         return bool(self.is_force_row.any()) and self.run.t_contact_s is not None
+
+
+def base_compliance_m_per_N(loss: float, exponent: float) -> float:
+    """The base spring's compliance for a strength given as the blocked-force loss it causes on the reference
+    actuator (2 layers, Table I effective values) at 250 V: a fixed conversion, so one strength means one spring
+    whatever actuator the data holds (a stiffer actuator loses more to the same spring)."""
+    a = REFERENCE_ACTUATOR
+    return op.compliance_for_loss(loss, act.stiffness_N_per_m(a), float(act.blocked_force_N(a, 250.0)), exponent)
 
 
 def spring_fraction(k_N_per_m: float, compliance: float) -> float:

@@ -4,16 +4,19 @@ pairs side by side; /work/coord/notes/forms.md is the partition):
 
 | candidate | family (shape parameters) | strength |
 |---|---|---|
-| hysteresis | generalised Prandtl-Ishlinskii on the effective net drive; threshold density ~ r^gamma (loop width grows as amplitude^(gamma + 2)) | loop half-width at mid-swing, full drive, / full drive |
-| creep | power-law (Nutting) superposition of every drive increment, exponent n; the log law at n = 0 | growth per decade of time at 1 s, fraction of the step |
-| field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(2 V/um) / d31(0) - 1 |
-| base_compliance, sensor_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | secant compliance at 50 mN, m/N |
-| width_loss | constant kerf per cut edge on the tapered plate | fraction of the nominal mean width lost |
+| hysteresis | generalised Prandtl-Ishlinskii on the effective net drive; threshold density ~ r^gamma |
+|   | (loop width grows as amplitude^(gamma + 2)) | loop gap at mid-swing / span, full drive |
+| creep | power-law (Nutting) superposition of every drive increment, exponent n; the log law at n = 0 |
+|   | | mean growth per decade, 10 ms - 100 s |
+| field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(250 V) / d31(100 V) - 1 |
+| base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
+| sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
+| width_loss | constant kerf per cut edge on the tapered plate | fraction of the mean width lost |
 | pzt_thickness, pzt_modulus, cf_thickness | the parameter scaled | fractional change |
-| effective_length | active length scaled, the rigid extension kept (imperfect grounding) | fractional change |
-| sensor_drift | per run a penalised cubic spline plus a warm-up t / (t + tau) of the force baseline | RMS baseline wander, N |
+| grounding_lengthening | active length scaled, the rigid extension kept | fractional change |
+| sensor_drift | per run a penalised cubic spline plus a warm-up t / (t + tau) of the force baseline | N/sqrt(s) |
 | bias_error | coupler lengthening offset (leg) | m |
-| stage_backlash | play on the stage-target sequence | m |
+| stage_backlash | play on the stage-target sequence | m (full width) |
 
 A strength of 0 is the nominal model exactly. Fabrication shifts (`TOLERANCE`) are effects only BEYOND the
 tolerance band of their parameter: within it they belong to the specimens' scatter (`tolerances.py`)."""
@@ -50,18 +53,18 @@ class Family:
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (
-    Family("hysteresis", "loop half-width / full drive (250 V)", (0.0, 0.2),
+    Family("hysteresis", "loop gap at mid-swing / span, full drive (250 V)", (0.0, 0.3),
            "generalised Prandtl-Ishlinskii (threshold density ~ r^gamma)", "drive",
            {"density_exponent": Shape(0.0, -1.5, 1.5, 1.0)}, scale=0.05),
-    Family("creep", "per decade of time at 1 s (fraction of a step)", (0.0, 0.12),
+    Family("creep", "mean growth per decade of time over 10 ms - 100 s (fraction of a step)", (0.0, 0.12),
            "power-law superposition of drive increments (log law at n = 0)", "drive",
            {"exponent": Shape(0.1, 0.0, 0.6, 0.3)}, scale=0.01),
-    Family("field_dependent_d31", "d31(2 V/um) / d31(0) - 1", (-0.6, 1.5),
+    Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),
            "d31 gain polynomial in field (linear + quadratic, either sign)", "drive",
            {"curvature": Shape(0.5, -1.0, 2.0, 1.0)}, scale=0.2),
-    Family("base_compliance", "m/N (secant at 50 mN)", (0.0, 2e-3),
+    Family("base_compliance", "blocked-force loss of the 2-layer actuator at 250 V", (0.0, 0.8),
            "series spring at the actuator base, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
-           {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=1e-4),
+           {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=0.1),
     Family("sensor_compliance", "m/N (secant at 50 mN)", (0.0, 2e-3),
            "series spring in the force sensor, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
            {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=5e-5),
@@ -71,14 +74,14 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            "PZT plate thickness scaled", "params", tolerance=0.04, scale=0.1),
     Family("pzt_modulus", "fractional change of the PZT modulus", (-0.6, 0.6),
            "effective PZT modulus scaled", "params", tolerance=0.05, scale=0.1),
-    Family("effective_length", "fractional change of the active length", (-0.3, 0.5),
+    Family("grounding_lengthening", "fractional change of the active length", (-0.3, 0.5),
            "active length scaled, the rigid extension kept (clamp line moved)", "params", tolerance=0.02,
            scale=0.05),
     Family("cf_thickness", "fractional change of the carbon-fibre layer thickness", (-0.7, 1.0),
            "carbon-fibre layer thickness scaled", "params", tolerance=0.10, scale=0.2),
-    Family("sensor_drift", "N (RMS baseline wander)", (0.0, math.inf),
+    Family("sensor_drift", "N/sqrt(s) (baseline wander rate)", (0.0, math.inf),
            "per-run force baseline: penalised cubic spline + warm-up t/(t + tau)", "baseline",
-           {"warmup_log10_tau_s": Shape(1.5, 0.5, 3.0, 1.0)}, scale=1e-3),
+           {"warmup_log10_tau_s": Shape(1.5, 0.5, 3.0, 1.0)}, scale=2e-5),
     Family("bias_error", "m", (-150e-6, 150e-6), "coupler lengthening offset", "design", scale=20e-6),
     Family("stage_backlash", "m", (0.0, 60e-6), "play on the stage-target sequence", "stage", scale=5e-6),
 )}

@@ -56,15 +56,17 @@ def pi_deviations(u: np.ndarray) -> np.ndarray:
     return np.array([u - play(u, r, y0=float(u[0])) for r in pi_radii()])
 
 
-def pi_weights(half_width: float, density_exponent: float) -> np.ndarray:
-    """Weights alpha_i of the PI hysteresis y = u - sum alpha_i D_i. Threshold density ~ r^gamma: the loop of a
-    swing +-A has half-width sum alpha_i min(r_i, A - r_i)+, which grows as A^(gamma + 2) (gamma = 0: the
-    Rayleigh-like width ~ A^2, a fraction of the span ~ A). Scaled so that at full drive (A = 1) the half-width
-    is `half_width` (in units of the full drive)."""
+def pi_weights(gap_over_span: float, density_exponent: float) -> np.ndarray:
+    """Weights alpha_i of the PI hysteresis y = (u - sum alpha_i D_i) / G, G = 1 - sum alpha_i r_i (the full-drive
+    gain, so a full-drive cycle keeps its nominal span). Threshold density ~ r^gamma: the loop of a swing +-A has
+    half-width sum alpha_i min(r_i, A - r_i)+, growing as A^(gamma + 2) (gamma = 0: a Rayleigh-like loop whose
+    share of the span grows ~ A). Scaled so that at full drive (A = 1) the loop's full width at mid-swing over the
+    output's span is `gap_over_span`: lambda A1 / (1 - lambda B1) = s."""
     r = pi_radii()
     dens = r ** density_exponent
-    h1 = float(np.sum(dens * np.minimum(r, 1.0 - r)))
-    return half_width * dens / h1
+    a1 = float(np.sum(dens * np.minimum(r, 1.0 - r)))
+    b1 = float(np.sum(dens * r))
+    return gap_over_span / (a1 + gap_over_span * b1) * dens
 
 
 def pi_full_drive_gain(weights: np.ndarray) -> float:
@@ -74,23 +76,27 @@ def pi_full_drive_gain(weights: np.ndarray) -> float:
     return 1.0 - float(np.sum(weights * pi_radii()))
 
 
-def pi_slope_after_reversal(half_width: float, density_exponent: float) -> float:
-    """dy/du right after a reversal (every play stuck): 1 - sum alpha_i; the family keeps it positive."""
-    return 1.0 - float(np.sum(pi_weights(half_width, density_exponent)))
+def pi_slope_after_reversal(gap_over_span: float, density_exponent: float) -> float:
+    """dy/du right after a reversal (every play stuck), before the full-drive normalisation: 1 - sum alpha_i."""
+    return 1.0 - float(np.sum(pi_weights(gap_over_span, density_exponent)))
 
 
 # ------------------------------------------------------------------ creep: power law (log law at n -> 0)
-CREEP_TAU0_S = 1e-3   # regularises the kernel at the step itself
+CREEP_TAU0_S = 1e-3                # regularises the kernel at the step itself
+CREEP_SPAN_DECADES = (-2.0, 2.0)   # the strength is the mean growth per decade over 10 ms - 100 s
 
 
 def creep_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
-    """phi_n(tau) = ((tau + tau0)^n - 1) / (n ln 10) (tau in s), log10(tau + tau0) at n = 0: zero at 1 s, slope
-    one per decade of time at 1 s. A step grows as 1 + g phi_n(t - t_step): low early, on nominal at 1 s, still
-    creeping after (Nutting's power law; the log law is its n -> 0 limit)."""
+    """phi_n(tau) = ((tau + tau0)^n - 1) / (n ln 10) / m_n (tau in s), log10(tau + tau0) at n = 0: zero at 1 s,
+    growing by 1 per decade on average over 10 ms - 100 s (m_n: the mean of the slope (tau)^n per decade there).
+    A step grows as 1 + g phi_n(t - t_step): low early, on nominal at 1 s, still creeping after (Nutting's power
+    law; the log law is its n -> 0 limit)."""
     t = np.asarray(tau_s, float) + CREEP_TAU0_S
     if exponent < 1e-6:
         return np.log10(t)
-    return (t ** exponent - 1.0) / (exponent * math.log(10.0))
+    a, b = CREEP_SPAN_DECADES
+    mean_slope = (10.0 ** (exponent * b) - 10.0 ** (exponent * a)) / (exponent * math.log(10.0) * (b - a))
+    return (t ** exponent - 1.0) / (exponent * math.log(10.0)) / mean_slope
 
 
 def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:
@@ -103,27 +109,48 @@ def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ field-dependent d31
-D31_REF_FIELD_V_PER_UM = 2.0     # the strength is the gain at this field relative to zero field
+D31_FIELD_SCALE_V_PER_UM = 2.0   # the polynomial's variable is E / 2 V/um
 D31_ANCHOR_V_PER_UM = 1.0        # the nominal d31 is taken to hold here (an effective value over the range)
+D31_REF_VOLTS = (100.0, 250.0)   # the strength is the gain at 250 V over the gain at 100 V (nominal plate)
 
 
-def d31_gain(field_V_per_um: np.ndarray, strength: float, curvature: float) -> np.ndarray:
-    """G(E) = 1 + s [(1 - q) E / E_ref + q (E / E_ref)^2]: a polynomial in field of either sign (s < 0: d31
-    falls with field), q the quadratic share; G(E_ref) = 1 + s. Floored at 0.05 (a d31 cannot change sign)."""
-    x = np.abs(field_V_per_um) / D31_REF_FIELD_V_PER_UM
-    return np.maximum(1.0 + strength * ((1.0 - curvature) * x + curvature * x * x), 0.05)
+def d31_gain(field_V_per_um: np.ndarray, slope: float, curvature: float) -> np.ndarray:
+    """G(E) = 1 + a [(1 - q) x + q x^2], x = E / 2 V/um: a polynomial in field of either sign (a < 0: d31 falls
+    with field), q the quadratic share. Floored at 0.05 (a d31 cannot change sign)."""
+    x = np.abs(field_V_per_um) / D31_FIELD_SCALE_V_PER_UM
+    return np.maximum(1.0 + slope * ((1.0 - curvature) * x + curvature * x * x), 0.05)
 
 
-def plate_map(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float) -> np.ndarray:
+def d31_slope(strength: float, curvature: float, pzt_thickness_m: float) -> float:
+    """The polynomial's coefficient a for which G(250 V / t_p) / G(100 V / t_p) - 1 = strength (t_p the nominal
+    plate): the ratio is a Moebius function of a, inverted in closed form."""
+    x1, x2 = (v / pzt_thickness_m * 1e-6 / D31_FIELD_SCALE_V_PER_UM for v in D31_REF_VOLTS)
+    p1 = (1.0 - curvature) * x1 + curvature * x1 * x1
+    p2 = (1.0 - curvature) * x2 + curvature * x2 * x2
+    den = p2 - (1.0 + strength) * p1
+    return strength / den if abs(den) > 1e-12 else 0.0
+
+
+def plate_map(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
+              ref_thickness_m: float | None = None) -> np.ndarray:
     """Effective plate voltage v G(E) / G(E_anchor): the strain a plate makes with the field-dependent d31, in
-    volts of the nominal d31."""
+    volts of the nominal d31. The strength refers to the nominal plate `ref_thickness_m` (default: this one)."""
+    a = d31_slope(strength, curvature, ref_thickness_m or pzt_thickness_m)
     e = np.abs(v_V) / pzt_thickness_m * 1e-6
-    anchor = float(d31_gain(np.array([D31_ANCHOR_V_PER_UM]), strength, curvature)[0])
-    return v_V * d31_gain(e, strength, curvature) / anchor
+    anchor = float(d31_gain(np.array([D31_ANCHOR_V_PER_UM]), a, curvature)[0])
+    return v_V * d31_gain(e, a, curvature) / anchor
 
 
 # ------------------------------------------------------------------ series spring (power law, push / pull)
-SPRING_REF_FORCE_N = 0.05   # the strength is the secant compliance at this force
+SPRING_REF_FORCE_N = 0.05   # the sensor spring's strength is its secant compliance at this force
+
+
+def compliance_for_loss(loss: float, k_N_per_m: float, f0_N: float, exponent: float) -> float:
+    """The compliance C of a spring x = C F_ref (F/F_ref)^beta that takes the fraction `loss` off a blocked force
+    f0 of an actuator of stiffness k: F = (1 - loss) f0 and F + k x(F) = f0."""
+    loss = min(max(loss, 0.0), 0.95)
+    f = (1.0 - loss) * f0_N
+    return loss * f0_N / (k_N_per_m * SPRING_REF_FORCE_N * (f / SPRING_REF_FORCE_N) ** exponent)
 
 
 def spring_deflection(force_N: np.ndarray, compliance: float, exponent: float, pull_ratio: float) -> np.ndarray:
@@ -135,29 +162,27 @@ def spring_deflection(force_N: np.ndarray, compliance: float, exponent: float, p
 
 
 def spring_solve_many(f0_N: np.ndarray, k_N_per_m: float, springs: list[tuple[float, float, float]],
-                      iterations: int = 30) -> np.ndarray:
+                      points: int = 600) -> np.ndarray:
     """F with F + k sum_j x_j(F) = F0: the actuator's force F0 = F_piezo + k x_push on a support that gives way by
-    the series springs' deflections x_j (each (C, beta, rho), `spring_deflection`). F lies between 0 and F0 and the
-    left side is monotone in F, so bisection converges for any beta."""
+    the series springs' deflections x_j (each (C, beta, rho), `spring_deflection`). The left side is monotone in
+    F, so its inverse is tabulated on a fine grid of F (geometric from 1 uN to beyond the largest |F0|, each
+    side) and interpolated; linear springs have the closed form."""
     f0 = np.asarray(f0_N, float)
     if not springs:
         return f0.copy()
     if all(beta == 1.0 for _, beta, _ in springs):
-        # linear springs: closed form on each side
         push = 1.0 + k_N_per_m * sum(c for c, _, _ in springs)
         pull = 1.0 + k_N_per_m * sum(c * rho for c, _, rho in springs)
         return np.where(f0 >= 0, f0 / push, f0 / pull)
-    lo = np.minimum(f0, 0.0)
-    hi = np.maximum(f0, 0.0)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        g = mid - f0
-        for c, beta, rho in springs:
-            g = g + k_N_per_m * spring_deflection(mid, c, beta, rho)
-        up = g > 0
-        hi = np.where(up, mid, hi)
-        lo = np.where(up, lo, mid)
-    return 0.5 * (lo + hi)
+    top = max(float(np.max(np.abs(f0))) if f0.size else 0.0, 1e-5)
+    f = np.r_[0.0, np.geomspace(1e-6, top, points)]
+    out = np.empty_like(f0)
+    for sign, side in ((1.0, f0 >= 0), (-1.0, f0 < 0)):
+        if not side.any():
+            continue
+        left = f + k_N_per_m * sum(sign * spring_deflection(sign * f, c, beta, rho) for c, beta, rho in springs)
+        out[side] = sign * np.interp(np.abs(f0[side]), left, f)
+    return out
 
 
 # ------------------------------------------------------------------ baseline (sensor drift)

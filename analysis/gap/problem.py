@@ -326,7 +326,8 @@ class Problem:
 
     def residual(self, lay: Layout, x: np.ndarray) -> np.ndarray:
         m = self.model(lay, x)
-        z = (self.y - m) / self.sigma
+        with np.errstate(invalid="ignore"):
+            z = (self.y - m) / self.sigma
         z = np.where(np.isfinite(z), z, NAN_RESIDUAL)
         return np.r_[z, self._prior(lay, x)]
 
@@ -371,7 +372,8 @@ class Problem:
         return fit
 
     def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
-        """RMS change of the fitted force baselines from each run's first force sample (N)."""
+        """Wander rate of the fitted force baselines, N/sqrt(s): sqrt(sum of squared changes between points 4 s
+        apart / time spanned), over every run (a random walk's rate)."""
         tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
         ss, n = 0.0, 0
         for k, e in enumerate(self.engines):

@@ -38,7 +38,7 @@ def scaled(a: ActuatorParams, name: str, s: float) -> ActuatorParams:
         return act.with_changes(a, pzt_thickness_m=a.pzt_thickness_m * (1.0 + s))
     if name == "pzt_modulus":
         return act.with_changes(a, pzt_modulus_Pa=a.pzt_modulus_Pa * (1.0 + s))
-    if name in ("length", "effective_length"):
+    if name in ("length", "grounding_lengthening"):
         # the clamp line moved: the active length changes, the rigid extension (l_r l) keeps its length
         length = a.length_m * (1.0 + s)
         return act.with_changes(a, length_m=length, length_ratio=a.length_ratio * a.length_m / length)

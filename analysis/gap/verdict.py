@@ -42,7 +42,7 @@ SEPARATED_BY: dict[str, str] = {
     "pzt_thickness": "the plates' thickness measured, or actuators of other layer counts (a thicker plate "
                      "changes their stiffness ratio)",
     "pzt_modulus": "a resonance (or bending) test of a bare plate, or actuators of other layer counts",
-    "effective_length": "the free length past the clamp line measured, or the tip stroke at two points along the "
+    "grounding_lengthening": "the free length past the clamp line measured, or the tip stroke at two points along the "
                         "actuator",
     "cf_thickness": "the cured laminate's thickness measured, or actuators of other layer counts",
     "sensor_drift": "undriven holds between steps (the baseline moves while nothing is driven)",
