@@ -162,6 +162,10 @@ class LoadstarSensor:
         return self._capacity_N
 
     def tare(self) -> None:
+        # One reading first: a sensor already saturated would be zeroed at its saturation level by the tare and
+        # then read 0 whatever pushed on it (a contact search would drive the leg into it blind). The reading
+        # raises DeviceFault (overload) beyond capacity, as the Nano17 driver does on its tare.
+        self.read_N()
         reply = self._line.query(self.commands.tare, timeout_s=self.tare_timeout_s)
         if reply.upper() != "TARED":
             message = f"{self.device}: expected 'Tared' after {self.commands.tare}, got {reply!r}"

@@ -7,8 +7,9 @@ from __future__ import annotations
 from typing import Any
 
 from hamr_bench.config import Section, section
+from hamr_bench.errors import ConfigError
 from sim_devices.bench import BenchSettings, SimBench, parse_fault
-from sim_devices.bench_effects import check_effects
+from sim_devices.bench_effects import check_effects, check_shapes
 
 
 def make_bench(
@@ -25,13 +26,19 @@ def make_bench(
     file_design = sim.int("design", defaults.design, lo=1, hi=5)
     file_layers = sim.int("layers", defaults.layers, lo=1, hi=3)
     file_seed = sim.int("seed", defaults.seed)
+    shapes = _table_of_tables(sim, "effect_shapes")
+    specimen_seed = sim.int("specimen_seed", -1, lo=-1)
+    model = _table_of_tables(sim, "model")
     settings = BenchSettings(
         fixture=fixture,
         design=design if design is not None else file_design,
         layers=layers if layers is not None else file_layers,
         params_set=sim.str("params", defaults.params_set, choices=("reported", "effective")),
         effects={**file_effects, **(effects or {})},
+        effect_shapes=check_shapes(shapes, sim.where("effect_shapes")),
         seed=seed if seed is not None else file_seed,
+        specimen_seed=None if specimen_seed < 0 else specimen_seed,
+        dynamics=sim.bool("dynamics", defaults.dynamics),
         touch_stage_m=sim.float("touch_stage_m", defaults.touch_stage_m),
         stage_limits_m=sim.float_pair("stage_travel_m", defaults.stage_limits_m),
         stage_velocity_m_per_s=sim.float("stage_velocity_m_per_s", defaults.stage_velocity_m_per_s, positive=True),
@@ -46,7 +53,16 @@ def make_bench(
         metres_per_pixel=camera.float("metres_per_pixel", defaults.metres_per_pixel, positive=True),
         noise=sim.bool("noise", defaults.noise),
         faults=tuple(parse_fault(f) for f in (faults or [])),
-        model_overrides=dict(model_overrides or {}),
+        model_overrides={**model, **(model_overrides or {})},
     )
     sim.check_no_unknown_keys()
     return SimBench(settings)
+
+
+def _table_of_tables(sim: Section, key: str) -> dict[str, dict]:
+    """A `[sim]` key holding a table of tables (`effect_shapes`, `model`), each inner table checked by its user."""
+    value = sim.data.get(key, {})
+    sim.mark_used(key)
+    if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+        raise ConfigError(f"{sim.where(key)}: expected a table of tables, e.g. {{ hysteresis = {{ r0 = 0.4 }} }}")
+    return {k: dict(v) for k, v in value.items()}

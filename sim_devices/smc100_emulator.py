@@ -12,7 +12,7 @@ bench."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from hamr_bench.clock import Clock
@@ -194,6 +194,13 @@ class Smc100Emulator:
         x0 = p.initial_position_m
         hold = _Motion(t0, x0, x0, [], x0, self._half_play_m, "hold")
         self._history: list[_Motion] = [hold]
+        # Called with the time from which the stage's motion changes (a command, a fault): the simulated bench
+        # recomputes its physics from there.
+        self.motion_listeners: list[Callable[[float], None]] = []
+
+    def _motion_changes(self, time_s: float) -> None:
+        for listener in self.motion_listeners:
+            listener(time_s)
 
     # -- time ----------------------------------------------------------------------------------------------
     @property
@@ -231,6 +238,7 @@ class Smc100Emulator:
         was_moving = self.family in ("MOVING", "HOMING") and t < motion.t_end
         direction = motion.velocity_at(t)
         self._history[-1] = motion.truncated(t)
+        self._motion_changes(t)
         if name == "following_error":
             self.state_code = codes.DISABLE_FROM_MOVING if was_moving else codes.DISABLE_FROM_READY
             self.error_bits |= 1 << codes.BIT_FOLLOWING_ERROR
@@ -312,6 +320,7 @@ class Smc100Emulator:
             end = segments[-1].t0 + segments[-1].dur if segments else t
             segments.append(_Segment(end, x1, 0.0, 0.0, self.params.home_settle_s))
         self._history.append(_Motion(t, x0, x1, segments, mech0, self._half_play_m, kind))
+        self._motion_changes(t)
 
     def home(self, t: float) -> str | None:
         self.update(t)
@@ -353,6 +362,7 @@ class Smc100Emulator:
         motion = self._motion
         x, v = motion.motor_at(t), motion.velocity_at(t)
         self._history[-1] = motion.truncated(t)
+        self._motion_changes(t)
         a = self.acceleration_m_per_s2
         if v != 0:
             dur = abs(v) / a
@@ -371,6 +381,7 @@ class Smc100Emulator:
         self.update(t)
         motion = self._motion
         self._history[-1] = motion.truncated(t)
+        self._motion_changes(t)
         self._counter_offset_m = self._motion.x_end
         self.error_bits = 0
         self.error_letter = "@"

@@ -86,15 +86,24 @@ def test_iload_reads_millipounds_and_capacity_in_pounds():
 
 
 def test_tare_both_command_sets():
-    with expected_protocol(LoadstarSensor, OPEN_DI1000 + [(b"CT0\r", b"Tared\r\n")]) as sensor:
+    # a tare reads once first (a saturated sensor must not be zeroed at its saturation level)
+    script = OPEN_DI1000 + [(b"W\r", b"0.012\r\n"), (b"CT0\r", b"Tared\r\n")]
+    with expected_protocol(LoadstarSensor, script) as sensor:
         sensor.tare()
-    script = OPEN_ILOAD + [(b"TARE\r", b"Tared\r\n")]
+    script = OPEN_ILOAD + [(b"O0W1\r", b"12\r\n"), (b"TARE\r", b"Tared\r\n")]
     with expected_protocol(LoadstarSensor, script, command_set="iload") as sensor:
         sensor.tare()
 
 
+def test_tare_of_a_saturated_sensor_is_an_overload_fault_and_sends_no_tare():
+    with expected_protocol(LoadstarSensor, OPEN_DI1000 + [(b"W\r", b"10.500\r\n")]) as sensor:
+        with pytest.raises(DeviceFault, match="overload"):
+            sensor.tare()
+
+
 def test_tare_with_a_wrong_answer_is_a_protocol_error():
-    with expected_protocol(LoadstarSensor, OPEN_DI1000 + [(b"CT0\r", b"A\r\n")]) as sensor:
+    script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"CT0\r", b"A\r\n")]
+    with expected_protocol(LoadstarSensor, script) as sensor:
         with pytest.raises(DeviceProtocolError, match="Tared"):
             sensor.tare()
 

@@ -153,19 +153,6 @@ def fault_time_s(spec: str) -> float:
     return float(spec.rsplit("@", 1)[1]) if "@" in spec else 0.0
 
 
-# Moments to inject a fault on the short protocols (rig clock, s): while the drive holds the actuator at high
-# voltage (stage still), and for `static` while the stage steps into the leg. Read off the event timelines of the
-# short runs (`hamr-bench info`, or `fault_moments` below): drive_start ~0.4 s (free-displacement), ~16.5 s (leg
-# protocols, after the contact search), ~99.4 s (actuator, after its stiffness sweep); static's loading steps
-# start at ~16.3 s.
-FAULT_AT_DRIVE_S: dict[str, float] = {
-    "actuator": 99.7, "blocked-force": 16.85, "sag-sweep": 16.85, "free-displacement": 0.7, "static": 17.5,
-}
-# ... and during the contact search, when the stage is stepping toward the leg or tip.
-FAULT_AT_SEARCH_S: dict[str, float] = {
-    "actuator": 40.0, "blocked-force": 8.0, "sag-sweep": 8.0, "free-displacement": 0.2, "static": 8.0,
-}
-
 # A sensor sample is timed when the sensor takes it, then crosses the wire (a Loadstar line at 9600 baud: ~10 ms)
 # and waits for the runner's next poll (20 ms). A fault that cuts the link (disconnect, line noise) loses what was
 # still on its way: samples up to this old never reached the computer. Anything older must be in the recording.
@@ -176,10 +163,17 @@ DRIVER_DATED_TOPICS = ("/force",)
 # plus acceleration) and the driver's 50 ms TS polls. Samples up to this old may be lost on a disconnect.
 LINK_LOSS_BOUND_S = 0.2
 
+_MOMENTS: dict[str, dict[str, float]] = {}
+
+
 def fault_moments(protocol: str, tmp_factory: Any) -> dict[str, float]:
-    """The two moments the matrix injects faults at, read off a run of the short protocol: 'search' halfway
-    through the contact search (free-displacement, which has none: its first moves), 'drive' 0.3 s into the first
-    drive (static: into its second loading step)."""
+    """The two moments the matrix injects faults at, read off a run of the short protocol (cached per process):
+    'search' halfway through the contact search (free-displacement, which has none: its first moves), 'drive' 0.3 s
+    into the first drive (static: into its second loading step). Read off a run rather than written down, because
+    every change to a protocol, a driver's exchanges or the bench moves these moments (a fault meant for the drive
+    then lands between steps and goes unnoticed)."""
+    if protocol in _MOMENTS:
+        return _MOMENTS[protocol]
     from hamr_bench.recording import RecordingReader
 
     out = tmp_factory.mktemp("moments") / f"{protocol}.mcap"
@@ -194,7 +188,8 @@ def fault_moments(protocol: str, tmp_factory: Any) -> dict[str, float]:
     else:
         search = first["home"] + 0.1
     drive = (steps[1] if protocol == "static" else first["drive_start"]) + 0.3
-    return {"search": round(search, 3), "drive": round(drive, 3)}
+    _MOMENTS[protocol] = {"search": round(search, 3), "drive": round(drive, 3)}
+    return _MOMENTS[protocol]
 
 
 def phase_at(events: list, at_s: float) -> str:

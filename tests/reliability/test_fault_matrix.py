@@ -14,13 +14,12 @@ import pytest
 
 from tests.reliability.harness import (
     ALL_FAULTS,
-    FAULT_AT_DRIVE_S,
-    FAULT_AT_SEARCH_S,
     IN_TRANSIT_S,
     PROTOCOL_NAMES,
     loss_allowed,
     takes_the_daq,
     expected_safe_bound_s,
+    fault_moments,
     reference_samples,
     run_fault_case,
 )
@@ -43,7 +42,7 @@ def test_cases_cover_every_fault_and_every_protocol():
 
 @pytest.mark.parametrize("protocol, fault, moment", CASES, ids=[f"{p}-{f}-{m}" for p, f, m in CASES])
 def test_fault_ends_safe_and_keeps_earlier_samples(tmp_path_factory, protocol, fault, moment):
-    at_s = (FAULT_AT_DRIVE_S if moment == "drive" else FAULT_AT_SEARCH_S)[protocol]
+    at_s = fault_moments(protocol, tmp_path_factory)[moment]
     reference = reference_samples(protocol, at_s, tmp_path_factory)
     outcome = run_fault_case(protocol, f"{fault}@{at_s}", tmp_path_factory.mktemp("f") / "run.mcap", reference)
 
