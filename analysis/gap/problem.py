@@ -95,16 +95,6 @@ class Fit:
         z = self.z
         return float(z @ z)
 
-    @property
-    def prior(self) -> float:
-        """The prior rows' share of the objective (specimen gains, shapes, drift smoothness)."""
-        return self.objective - self.chi2_rows
-
-    def statistic_against(self, base: "Fit", scale2: float) -> float:
-        """The likelihood-ratio statistic of this fit against a nested `base`: the data part scaled by the
-        over-dispersion (model-form error inflates the rows' chi^2, not the priors), the prior part as it is."""
-        return (base.chi2_rows - self.chi2_rows) / scale2 + (base.prior - self.prior)
-
     def value(self, kind: str, *key: object) -> float:
         return float(self.x[self.layout.index[(kind,) + tuple(key)]])
 

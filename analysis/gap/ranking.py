@@ -19,7 +19,7 @@ from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
 from analysis.gap.screening import grid_start, n_params, overdispersion
 
 MAX_EFFECTS = 4
-MAX_TRIED = 3            # promising candidates tried at each step (by screening improvement)
+MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
 TIE_RATIO = 1.1          # held-out RMS within 10 % counts as a tie
 STEP_ALPHA = 0.01
 
@@ -36,8 +36,7 @@ def _closed(before: float, after: float) -> float:
     return (before - after) / (before - 1.0) if before > 1.0 else 0.0
 
 
-def select(p: Problem, nominal: Fit, screened: list[Screened], screen_fits: dict[str, Fit], judge: Judge,
-           gap: bool) -> Selection:
+def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool) -> Selection:
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
@@ -50,23 +49,20 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], screen_fits: dict
             break   # at the noise floor
         tried: dict[str, Fit] = {}
         for name in pool[:MAX_TRIED]:
-            if current is nominal and name in screen_fits:
-                tried[name] = screen_fits[name]   # the screening fit is this step's fit
-            else:
-                tried[name] = p.solve(tuple(current.names) + (name,), grid_start(p, current, name)[0], max_nfev=25)
-        scale2 = overdispersion(p, min(tried.values(), key=lambda f: f.chi2_rows))
+            tried[name] = p.solve(tuple(current.names) + (name,), grid_start(p, current, name), max_nfev=40)
+        scale2 = overdispersion(p, min(tried.values(), key=lambda f: f.objective), 0)
         rows = []
         for name, f in tried.items():
             ho = judge.heldout(f)
-            rows.append(StepCandidate(name, f.statistic_against(current, scale2), ho,
-                                      judge.reduction_ci(current, f), float(f.effects[name].strength)))
+            rows.append(StepCandidate(name, current.objective - f.objective, ho, judge.reduction_ci(current, f),
+                                      float(f.effects[name].strength)))
         rows.sort(key=lambda c: c.heldout.rms)
         lead = _lead(rows, tried)
-        thr = float(stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, lead.name)))
+        thr = float(stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, lead.name))) * scale2
         if not (lead.improvement > thr and lead.reduction_ci95[0] > 0):
             rejected = rows
             break
-        ambiguous = tuple(c.name for c in rows if c.name != lead.name and _tie(c, lead, tried, judge))
+        ambiguous = tuple(c.name for c in rows if c.name != lead.name and _tie(c, lead, tried, judge, scale2))
         current = tried[lead.name]
         ho = judge.heldout(current)
         steps.append(WaterfallStep(lead.name, tuple(current.names), ho, _closed(ho0.rms, ho.rms), ambiguous, rows))
@@ -83,7 +79,7 @@ def _lead(rows: list[StepCandidate], tried: dict[str, Fit]) -> StepCandidate:
     return min(tied, key=lambda c: tried[c.name].objective + 2 * len(tried[c.name].layout.params))
 
 
-def _tie(c: StepCandidate, lead: StepCandidate, tried: dict[str, Fit], judge: Judge) -> bool:
+def _tie(c: StepCandidate, lead: StepCandidate, tried: dict[str, Fit], judge: Judge, scale2: float) -> bool:
     """Another explanation this data cannot tell from the lead: held-out errors within 10 % or their paired
     difference's interval holding 0, AND in-sample objectives within the 1 % point of chi^2(1) x over-dispersion,
     AND it explains a real part of the gap itself."""
@@ -91,7 +87,7 @@ def _tie(c: StepCandidate, lead: StepCandidate, tried: dict[str, Fit], judge: Ju
         return False
     lo, _ = judge.difference_ci(tried[c.name], tried[lead.name])
     close_heldout = lo <= 0 or c.heldout.rms < TIE_RATIO * lead.heldout.rms
-    in_sample = abs(c.improvement - lead.improvement)
+    in_sample = abs(tried[c.name].objective - tried[lead.name].objective) / scale2
     return bool(close_heldout and in_sample < stats.chi2.ppf(0.99, 1))
 
 
