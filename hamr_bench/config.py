@@ -146,9 +146,7 @@ def _value(annotation: Any, value: Any, name: str, place: Place, check: Check | 
             raise ConfigError(f"{where}: expected a non-empty list, got {value!r}")
         return tuple(_value(args[0], v, name, place, check, None, from_text) for v in value)
     if origin is dict:
-        if typing.get_origin(args[1]) is dict:
-            return _table_of_tables(where, value)
-        return _table_of_numbers(where, value)
+        return _table_of_tables(where, value) if typing.get_origin(args[1]) is dict else _table_of_numbers(where, value)
     if annotation in _SCALARS:
         return _SCALARS[annotation](where, value, check, from_text)
     raise ConfigError(f"{where}: cannot be set from a file")

@@ -71,8 +71,8 @@ class Clamp:
 
     def give_m(self, force_N: np.ndarray) -> np.ndarray:
         f = np.asarray(force_N, dtype=float)
-        k0 = np.where(f >= 0, self.k0, self.k0 * self.pull_ratio)  # type: ignore[attr-defined]
-        k3 = np.where(f >= 0, self.k3, self.k3 * self.pull_ratio)  # type: ignore[attr-defined]
+        k0 = np.asarray(np.where(f >= 0, self.k0, self.k0 * self.pull_ratio), dtype=np.float64)  # type: ignore[attr-defined]
+        k3 = np.asarray(np.where(f >= 0, self.k3, self.k3 * self.pull_ratio), dtype=np.float64)  # type: ignore[attr-defined]
         if self.k3 == 0.0:  # type: ignore[attr-defined]
             return f / k0
         # the real root of k3 d^3 + k0 d - f = 0 (Cardano; one real root since k0, k3 > 0)
@@ -85,8 +85,8 @@ class Clamp:
         """d'(F) = 1 / (k0 + 3 k3 d^2)."""
         f = np.asarray(force_N, dtype=float)
         d = self.give_m(f)
-        k0 = np.where(f >= 0, self.k0, self.k0 * self.pull_ratio)  # type: ignore[attr-defined]
-        k3 = np.where(f >= 0, self.k3, self.k3 * self.pull_ratio)  # type: ignore[attr-defined]
+        k0 = np.asarray(np.where(f >= 0, self.k0, self.k0 * self.pull_ratio), dtype=np.float64)  # type: ignore[attr-defined]
+        k3 = np.asarray(np.where(f >= 0, self.k3, self.k3 * self.pull_ratio), dtype=np.float64)  # type: ignore[attr-defined]
         return 1.0 / (k0 + 3.0 * k3 * d * d)
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -115,7 +116,7 @@ class FieldGain:
         z = (np.asarray(e, dtype=float) - self.switch_field_V_per_um * 1e6) / (self.width_V_per_um * 1e6)
         return 0.5 * (1.0 + np.tanh(0.5 * z))
 
-    def __call__(self, field_V_per_m: np.ndarray) -> np.ndarray:
+    def __call__(self, field_V_per_m: np.ndarray | float) -> np.ndarray:
         e = np.abs(np.asarray(field_V_per_m, dtype=float))
         if self._knots is not None:
             x, y, d = self._knots
@@ -149,7 +150,7 @@ class PronyCreep:
 
     @property
     def amplitudes(self) -> np.ndarray:
-        return self._a  # type: ignore[attr-defined,no-any-return]
+        return self._a  # type: ignore[attr-defined]
 
     def step_response(self, t_s: np.ndarray) -> np.ndarray:
         """Output after a unit step at t = 0 (1 as t -> infinity)."""
@@ -338,9 +339,9 @@ def creep_shape(shape: dict[str, float]) -> dict[str, tuple[float, ...]]:
     return {"taus_s": taus, "weights": weights}
 
 
-def gain_shape(shape: dict[str, float]) -> dict[str, float | str]:
+def gain_shape(shape: dict[str, float]) -> dict[str, Any]:
     _unknown(shape, D31_SHAPE, "field_dependent_d31")
     s = {**D31_SHAPE, **shape}
-    out: dict[str, float | str] = {k: float(v) for k, v in s.items() if k != "form"}
+    out: dict[str, Any] = {k: float(v) for k, v in s.items() if k != "form"}
     out["form"] = "knots" if s["form"] >= 0.5 else "logistic"
     return out

@@ -117,12 +117,12 @@ class SecondOrderMode:
 
     @property
     def lam(self) -> complex:
-        return self._lam  # type: ignore[attr-defined,no-any-return]
+        return self._lam  # type: ignore[attr-defined]
 
     def _step_gains(self, tau):
         """e^(lambda tau) and the input gains after a time tau into a step of length h: the target's value at the
         step start weighs g0, its value at the step end g1 (first-order hold over the full step h)."""
-        lam, h = self._lam, self.h_s  # type: ignore[attr-defined]
+        lam, h = self._lam, self.h_s
         e = np.exp(lam * tau)
         i0 = (e - 1.0) / lam                            # int_0^tau e^(lam (tau - s)) ds
         i1 = (e - 1.0 - lam * tau) / lam ** 2           # int_0^tau e^(lam (tau - s)) s ds
@@ -133,7 +133,7 @@ class SecondOrderMode:
         return (v - lam.conjugate() * x) / (lam - lam.conjugate())
 
     def from_modal(self, xi: np.ndarray | complex) -> tuple[np.ndarray, np.ndarray]:
-        return 2.0 * np.real(xi), 2.0 * np.real(self._lam * np.asarray(xi))  # type: ignore[attr-defined]
+        return np.asarray(2.0 * np.real(xi)), np.asarray(2.0 * np.real(self._lam * np.asarray(xi)))  # type: ignore[attr-defined]
 
     def run(self, x0: float, v0: float, target: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
         """Modal states xi at target[1:] grid points, starting from (x0, v0) at the time of target[0]. `offset`

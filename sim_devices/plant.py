@@ -258,8 +258,8 @@ class BenchPlant:
             xi_out[:] = 0.0
             return x_out, mode_out, xi_out
         mode = int(self.cols["mode"][-1])
-        q, dq = self._mode(mode).from_modal(complex(self.cols["xi"][-1]))   # the mode's own coordinate
-        q, dq = float(q), float(dq)
+        q_arr, dq_arr = self._mode(mode).from_modal(complex(self.cols["xi"][-1]))   # the mode's own coordinate
+        q, dq = float(q_arr), float(dq_arr)
         i = 0
         switches = 0
         while i < n:

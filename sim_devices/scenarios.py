@@ -196,7 +196,8 @@ def draw_shape(name: str, rng: np.random.Generator, strength: float) -> dict[str
         return out
     if name == "field_dependent_d31":
         if rng.random() < 0.5:
-            return {"form": 0.0, "switch_field_V_per_um": rng.uniform(0.3, 1.3), "width_V_per_um": rng.uniform(0.15, 0.5)}
+            return {"form": 0.0, "switch_field_V_per_um": rng.uniform(0.3, 1.3),
+                    "width_V_per_um": rng.uniform(0.15, 0.5)}
         return {"form": 1.0, "split": rng.uniform(0.3, 0.7), "low_tail": rng.uniform(0.0, 0.3),
                 "high_tail": rng.uniform(0.0, 0.2)}
     if name == "base_compliance":
@@ -209,8 +210,10 @@ def draw_shape(name: str, rng: np.random.Generator, strength: float) -> dict[str
                 "warmup_tau_s": rng.uniform(30.0, 300.0),
                 "reversion_s": float(math.exp(rng.uniform(math.log(300.0), math.log(3000.0))))}
     if name == "bias_error":
-        return {"run_fraction": rng.uniform(0.1, 0.5), "tau1_s": float(math.exp(rng.uniform(math.log(10), math.log(100)))),
-                "tau2_s": float(math.exp(rng.uniform(math.log(200), math.log(2000)))), "weight1": rng.uniform(0.2, 0.8)}
+        return {"run_fraction": rng.uniform(0.1, 0.5),
+                "tau1_s": float(math.exp(rng.uniform(math.log(10), math.log(100)))),
+                "tau2_s": float(math.exp(rng.uniform(math.log(200), math.log(2000)))),
+                "weight1": rng.uniform(0.2, 0.8)}
     return {}
 
 
@@ -243,7 +246,7 @@ def observables(name: str, strength: float, shape: dict[str, float], layers: int
     if name == "field_dependent_d31":
         from sim_devices.drive_chain import FIELD_HIGH_V_PER_M, FIELD_LOW_V_PER_M, FieldGain, gain_shape
 
-        g = FieldGain(strength, **gain_shape(shape))   # type: ignore[arg-type]
+        g = FieldGain(strength, **gain_shape(shape))
         return {"blocked_force_change_250V": float(g(FIELD_HIGH_V_PER_M)) - 1.0,
                 "blocked_force_change_100V": float(g(FIELD_LOW_V_PER_M)) - 1.0}
     if name == "hysteresis":

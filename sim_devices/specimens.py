@@ -57,7 +57,8 @@ def draw_specimen(seed: int, actuator: dict[str, float], design: dict[str, objec
         value = design[name]
         if isinstance(value, (tuple, list)):
             z = _normal(rng, len(value))
-            out_d[name] = [float(v) * (1.0 + tol.sigma * float(zi)) for v, zi in zip(value, z, strict=True)]
+            out_d[name] = [float(v) * (1.0 + tol.sigma * float(zi))
+                           for v, zi in zip(value, np.atleast_1d(z), strict=True)]
         elif tol.relative:
             out_d[name] = float(value) * (1.0 + tol.sigma * float(_normal(rng)))  # type: ignore[arg-type]
         else:

@@ -89,7 +89,8 @@ def _apply_fit(a: ActuatorParams, d: DesignParams | None, run: Any, fit: dict
     if entry:
         names = {"E_p": "pzt_modulus_Pa", "d31": "d31_m_per_V", "t_p": "pzt_thickness_m", "length": "length_m",
                  "width": "width_nom_m", "t_c": "cf_thickness_m"}
-        a = dataclasses.replace(a, **{f: _value(entry[k]) for k, f in names.items() if k in entry})
+        fitted: dict[str, Any] = {f: _value(entry[k]) for k, f in names.items() if k in entry}
+        a = dataclasses.replace(a, **fitted)
     designs = fit.get("designs", {}) or {}
     entry = (designs.get(str(run.design)) or designs.get(run.design)) if d is not None else None
     if entry and d is not None:
@@ -293,8 +294,9 @@ class RunEngine:
     def _leg_values(self, a: ActuatorParams, effects: Effects, y: np.ndarray, te: np.ndarray, is_force: np.ndarray,
                     nuis: RunNuisance, backlash_m: float) -> np.ndarray:
         d = self.design
+        assert d is not None  # a leg run always has its design (RunEngine reads it from the recording)
         bias = effects.get("bias_error")
-        if bias is not None and bias.strength != 0 and d is not None:
+        if bias is not None and bias.strength != 0:
             d = dataclasses.replace(d, bias_m=d.bias_m + bias.strength)
         base = effects.get("base_compliance")
         extra = [_SerialSpring(strength=base_compliance_m_per_N(base.strength, 1.0))] \

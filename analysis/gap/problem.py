@@ -177,20 +177,12 @@ class Problem:
             if f.kind != "baseline":
                 lo, hi = f.bounds
                 params.append(Param("strength", (n,), lo, hi, f.scale, min(max(0.0, lo), hi)))
-            for s_name, s in f.shapes.items():
-                params.append(Param("shape", (n, s_name), s.lo, s.hi, max(s.prior_sd, 1e-3), s.default))
-        for g in self.groups:
-            for j in (0, 1):
-                params.append(Param("gain", (g, j), -GAIN_BOUND, GAIN_BOUND, 0.05, 0.0))
-        for s in self.sessions:
-            fixture = next(e.run.fixture for e in self.engines if self.session_of(e) == s)
-            b = SHIFT_BOUND_M[fixture]
-            params.append(Param("shift", (s,), -b, b, b / 10, 0.0))
-        for c in self.chains:
-            lo, hi = LAG_BOUNDS_S[c[2]]
-            params.append(Param("lag", c, lo, hi, 5e-3, 0.0))
+            for s_name, shape in f.shapes.items():
+                params.append(Param("shape", (n, s_name), shape.lo, shape.hi, max(shape.prior_sd, 1e-3),
+                                    shape.default))
+        params += self._nuisance_params()
         if "sensor_drift" in names:
-            for k, e in enumerate(self.engines):
+            for k in range(len(self.engines)):
                 for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default
                                                   ).shape[1]):
                     params.append(Param("drift", (k, j), -1.0, 1.0, 1e-3, 0.0))
@@ -199,6 +191,19 @@ class Problem:
         lay = Layout(names, params, index, self.y.size, n_prior)
         lay.sparsity = self._sparsity(lay)
         return lay
+
+    def _nuisance_params(self) -> list[Param]:
+        """What every model carries whatever effects it names: per specimen group its two log gains, per session
+        its contact shift, per sensor chain its lag."""
+        params = [Param("gain", (g, j), -GAIN_BOUND, GAIN_BOUND, 0.05, 0.0) for g in self.groups for j in (0, 1)]
+        for s in self.sessions:
+            fixture = next(e.run.fixture for e in self.engines if self.session_of(e) == s)
+            b = SHIFT_BOUND_M[fixture]
+            params.append(Param("shift", (s,), -b, b, b / 10, 0.0))
+        for c in self.chains:
+            lo, hi = LAG_BOUNDS_S[c[2]]
+            params.append(Param("lag", c, lo, hi, 5e-3, 0.0))
+        return params
 
     def _n_prior(self, names: tuple[str, ...], params: list[Param]) -> int:
         n = 2 * len(self.groups) + sum(1 for p in params if p.kind == "shape")
@@ -231,8 +236,8 @@ class Problem:
             else:   # drift coefficient of run k
                 rows = np.zeros(self.y.size, bool)
                 rows[self.slices[p.key[0]]] = True
-            for j in np.flatnonzero(rows):
-                s[j, i] = 1
+            for row in np.flatnonzero(rows).tolist():
+                s[row, i] = 1
             for j in prior_of.get(i, []):
                 s[lay.n_rows + j, i] = 1
         return s.tocsr()
@@ -250,18 +255,22 @@ class Problem:
                 out.setdefault(i, []).append(j)
                 j += 1
         if "sensor_drift" in lay.names:
-            for k in range(len(self.engines)):
-                cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
-                n_s = self._smooth_rows(k)
-                for r in range(n_s):
-                    for c in cols[:-1]:
-                        out.setdefault(c, []).append(j + r)
-                j += n_s
-            for i, p in enumerate(lay.params):
-                if p.kind == "drift":
-                    out.setdefault(i, []).append(j)
-                    j += 1
+            self._drift_prior_rows(lay, out, j)
         return out
+
+    def _drift_prior_rows(self, lay: Layout, out: dict[int, list[int]], j: int) -> None:
+        """The drift baseline's smoothness rows (per run), then one ridge row per drift coefficient."""
+        for k in range(len(self.engines)):
+            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
+            n_s = self._smooth_rows(k)
+            for r in range(n_s):
+                for c in cols[:-1]:
+                    out.setdefault(c, []).append(j + r)
+            j += n_s
+        for i, p in enumerate(lay.params):
+            if p.kind == "drift":
+                out.setdefault(i, []).append(j)
+                j += 1
 
     # --- drift baseline --------------------------------------------------------------------------------------
     def drift_columns(self, k: int, log10_tau: float) -> np.ndarray:
@@ -377,7 +386,7 @@ class Problem:
         """Wander rate of the fitted force baselines, N/sqrt(s): sqrt(sum of squared changes between points 4 s
         apart / time spanned), over every run (a random walk's rate)."""
         tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
-        ss, n = 0.0, 0
+        ss, n = 0.0, 0.0
         for k, e in enumerate(self.engines):
             cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
             if cols:

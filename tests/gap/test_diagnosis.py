@@ -18,7 +18,8 @@ from tests.analysis.lab_traces import Effects, Lab, LabFile, Specimen, specimen_
 SPECIMENS = (Specimen("A", 1.02, 0.99), Specimen("B", 0.97, 1.01), Specimen("C", 1.0, 1.0))
 
 
-def write_lab(directory, effects: Effects, seed: int, volts=(120.0, 250.0), lab: Lab = Lab()) -> list:
+def write_lab(directory, effects: Effects, seed: int, volts=(120.0, 250.0), lab: Lab | None = None) -> list:
+    lab = lab or Lab()
     rng = np.random.default_rng(seed)
     out = []
     for test in ("blocked", "free"):

@@ -166,7 +166,7 @@ def test_clamp_force_balance_against_a_root_finder(shape):
         return float(np.real(roots[np.argmin(np.abs(np.imag(roots)))]))
 
     for u, q in ((1e-4, 0.0), (4e-5, 1e-5), (-3e-5, 0.0)):
-        expected = brentq(lambda f: f * (1 + k / ks) + k * give(f) - k * (u - q), -1.0, 1.0, xtol=1e-15)
+        expected = brentq(lambda f, u=u, q=q: f * (1 + k / ks) + k * give(f) - k * (u - q), -1.0, 1.0, xtol=1e-15)
         assert statics.contact_force_N(np.array([u]), np.array([q]))[0] == pytest.approx(expected, rel=1e-9)
     # the strength: the blocked force at 250 V lost by the fraction asked (rigid sensor)
     u250 = float(act.free_displacement_m(a, 250.0))
