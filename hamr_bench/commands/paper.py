@@ -35,10 +35,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.samples < 1:
         raise ConfigError(f"--samples must be at least 1, got {args.samples}")
-    progress = None
-    if sys.stderr.isatty():
-        def progress(message: str) -> None:
-            print(f"\r\033[K{message} ...", end="", file=sys.stderr, flush=True)
+    def show(message: str) -> None:
+        print(f"\r\033[K{message} ...", end="", file=sys.stderr, flush=True)
+
+    progress = show if sys.stderr.isatty() else None
 
     if args.readings:
         print(readings_markdown(compare_readings(seed=args.seed, progress=progress)), end="")

@@ -16,6 +16,8 @@ which buckle past their Euler load (`coupler_buckling`, on by default).
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -98,7 +100,7 @@ class DesignParams:
 
 
 # Table II + Table III (raw printed numbers; kappa converted per reading with KAPPA_READINGS).
-_TABLE = {
+_TABLE: dict[int, dict[str, Any]] = {
     1: dict(name="baseline", kapton_thickness_m=12.5e-6, bias_designed_m=0.0, k_ser_N_per_m=800.0,
             kappa=(0.0, 2.41e-5, 0.0), bias_m=-10e-6),
     2: dict(name="double thick Kapton", kapton_thickness_m=25e-6, bias_designed_m=0.0, k_ser_N_per_m=810.0,
@@ -126,6 +128,7 @@ def design_preset(design: int, kappa_units: str = DEFAULT_KAPPA_UNITS,
         return replace(base, design=5, name="biased with double thick Kapton - 2 DOF", swing=True,
                        swing_coupling=SWING_COUPLING)
     t = dict(_TABLE[design])
-    kappa = tuple(float(k) * f for k, f in zip(t.pop("kappa"), KAPPA_READINGS[kappa_units]))
+    k1, k2, k3 = (float(k) * f for k, f in zip(t.pop("kappa"), KAPPA_READINGS[kappa_units], strict=True))
+    kappa = (k1, k2, k3)
     d = DesignParams(design=design, kappa_N_m_per_rad=kappa, geometry=geometry, kappa_units=kappa_units, **t)
     return replace(d, **changes) if changes else d

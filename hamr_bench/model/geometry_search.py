@@ -44,7 +44,7 @@ BOUNDS = {  # name: (low, high), SI
     "leg_angle0_rad": (-0.9, 0.9),   # leg inclined up to ~50 deg from horizontal at fabrication
 }
 KEYS = list(GEOMETRY_KEYS)
-assert KEYS == list(BOUNDS)
+assert list(BOUNDS) == KEYS
 MAX_LEG_ANGLE_RAD = np.radians(70.0)   # beyond this the foot moves mostly sideways: not a lift mechanism
 MIN_STROKE_M = 0.1e-3                  # every design visibly strokes in Fig. 9
 _BAD, _IMPLAUSIBLE = -10.0, -5.0

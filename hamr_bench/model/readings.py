@@ -10,7 +10,7 @@ docs/model.md carries.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 from hamr_bench.model.designs import _TABLE, DEFAULT_KAPPA_UNITS, GEOMETRIES, KAPPA_READINGS
 from hamr_bench.model.flexures import prb_band_N_m_per_rad
@@ -41,7 +41,7 @@ def kappa_rows(kappa_units: str) -> list[KappaRow]:
     for design in (1, 2, 3, 4):
         t = _TABLE[design]
         lo, hi = prb_band_N_m_per_rad(t["kapton_thickness_m"])
-        for j, (value, factor) in enumerate(zip(t["kappa"], KAPPA_READINGS[kappa_units]), start=1):
+        for j, (value, factor) in enumerate(zip(t["kappa"], KAPPA_READINGS[kappa_units], strict=True), start=1):
             bound = value == 0.0
             rows.append(KappaRow(design, j, value, (TABLE_III_BOUND if bound else value) * factor, bound, lo, hi))
     return rows
@@ -119,10 +119,10 @@ def readings_markdown(reports: dict[str, ReadingReport]) -> str:
         printed = "< 1e-6" if row.bound else f"{row.printed:.3g}"
         cells = []
         for rows in per.values():
-            r = rows[i]
-            a, b = r.ratio
-            cells.append(f"< {r.kappa_N_m_per_rad:.2g} (< {_x(b)})" if r.bound
-                         else f"{r.kappa_N_m_per_rad:.2g} ({_x(a)}-{_x(b)})")
+            cell = rows[i]
+            a, b = cell.ratio
+            cells.append(f"< {cell.kappa_N_m_per_rad:.2g} (< {_x(b)})" if cell.bound
+                         else f"{cell.kappa_N_m_per_rad:.2g} ({_x(a)}-{_x(b)})")
         lines.append(f"| {row.design} | {row.joint} | {printed} | {row.prb_lo:.2g}-{row.prb_hi:.2g} | "
                      + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

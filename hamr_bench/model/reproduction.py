@@ -9,9 +9,10 @@ Band = 5th-95th percentile of the margin over `samples` joint draws (seeded: the
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Callable
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
@@ -19,6 +20,7 @@ from scipy.optimize import brentq
 from hamr_bench.errors import ModelError
 from hamr_bench.model.claims import CHECK, FITTED, INDEPENDENT, SPECS, STRUCTURAL, V_MAX, Outcome, evaluate
 from hamr_bench.model.designs import DEFAULT_KAPPA_UNITS, check_kappa_units
+from hamr_bench.model.powertrain import Powertrain
 from hamr_bench.model.readings import ReadingReport, compare_readings
 from hamr_bench.model.robustness import GEOMETRY_KEYS, perturbation_steps
 from hamr_bench.model.unpublished import GEOMETRY_TOLERANCE, SOURCES, Unpublished, draw
@@ -119,15 +121,15 @@ def source_sweeps(nominal: Unpublished, nominal_out: dict[str, Outcome], progres
         if progress:
             progress(f"sweep {name}")
         xs = _sweep_values(fname, lo, hi, getattr(nominal, fname))
-        outs = [evaluate(replace(nominal, **{fname: float(x)}, **extra)) for x in xs]
+        outs = [evaluate(replace(nominal, **_changes(fname, float(x), extra))) for x in xs]
         for i in ids:
             ms = [o[i].margin for o in outs]
-            inside = [m for x, m in zip(xs, ms) if lo <= x <= hi]
+            inside = [m for x, m in zip(xs, ms, strict=True) if lo <= x <= hi]
             by_source[i][name] = (min(inside), max(inside))
             for k in range(len(xs) - 1):
                 if (ms[k] > 0) != (ms[k + 1] > 0):
                     def margin_at(v: float, i: str = i, fname: str = fname, extra: dict = extra) -> float:
-                        return evaluate(replace(nominal, **{fname: v}, **extra))[i].margin
+                        return evaluate(replace(nominal, **_changes(fname, v, extra)))[i].margin
                     crossovers[i].append(_fmt(name, _crossing(margin_at, float(xs[k]), float(xs[k + 1]))))
     if progress:
         progress("sweep geometry 1 %")
@@ -225,9 +227,13 @@ def _energy_reason(nominal: Unpublished) -> str:
             "carbon-fibre modulus (a softer E_c favours 2x)")
 
 
+def _design3_reason(nominal: Unpublished) -> str:
+    return design3_slope(nominal)   # defined below, with the buckling and friction numbers it reports
+
+
 SPECIFIC_REASONS: dict[str, Callable[[Unpublished], str]] = {
     "actuator_energy_density": _energy_reason,
-    "sag_falls_d3": lambda nominal: design3_slope(nominal),
+    "sag_falls_d3": _design3_reason,
 }
 
 
@@ -242,6 +248,16 @@ def evaluate_d3(u: Unpublished) -> float:
     return float(-np.max(np.diff(s3)) / s3[0]) if np.all(np.isfinite(s3)) else -1.0
 
 
+def _changes(fname: str, value: float, extra: dict[str, Any]) -> dict[str, Any]:
+    return {fname: value, **extra}
+
+
+def _euler_load_N(p: Powertrain) -> float:
+    """The coupler strips' Euler load of a design built with buckling (design 3 always is in this check)."""
+    assert p.serial_chain is not None
+    return float(p.serial_chain.buckling_load_N)
+
+
 @lru_cache(maxsize=8)
 def design3_slope(u: Unpublished) -> str:
     """Buckling and friction tested as explanations of design 3's force falling with sag, with the numbers."""
@@ -249,7 +265,8 @@ def design3_slope(u: Unpublished) -> str:
     from hamr_bench.model.contact import LIFTED
     from hamr_bench.model.flexures import FLEXURE_LENGTH_BAND_M, FLEXURE_WIDTH_BAND_M
 
-    mN = lambda x: ", ".join(f"{1e3 * v:.2f}" for v in x) + " mN"
+    def mN(x):
+        return ", ".join(f"{1e3 * v:.2f}" for v in x) + " mN"
     p3 = u.powertrains[3]
     loads = p3.coupler_force_N(V_MAX, V_MAX, SAGS_M)
     chain = p3.serial_chain
@@ -257,13 +274,14 @@ def design3_slope(u: Unpublished) -> str:
     rigid = replace(u, coupler_buckling=False)
     weakest = replace(u, flexure_length_m=FLEXURE_LENGTH_BAND_M[1], flexure_width_m=FLEXURE_WIDTH_BAND_M[0])
     w3 = weakest.powertrains[3]
-    f3 = lambda v: v.reading_N(v.powertrains[3], np.array(V_MAX), SAGS_M)
+    def f3(v):
+        return v.reading_N(v.powertrains[3], np.array(V_MAX), SAGS_M)
     d1_best = float(np.nanmax(weakest.reading_N(weakest.powertrains[1], np.array(V_MAX), SAGS_M[1:])))
     # how long would the strips have to be (at the narrow end of the band) for design 3 to fall?
     lengths = np.linspace(FLEXURE_LENGTH_BAND_M[0], 600e-6, 26)
     falls = [L for L in lengths if evaluate_d3(replace(weakest, flexure_length_m=float(L))) > 0]
     need = (f"it would fall with strips >= {1e6 * falls[0]:.0f} um long at 1.5 mm width (Euler load "
-            f"{replace(weakest, flexure_length_m=float(falls[0])).powertrains[3].serial_chain.buckling_load_N:.3f} N)"
+            f"{_euler_load_N(replace(weakest, flexure_length_m=float(falls[0])).powertrains[3]):.3f} N)"
             if falls else f"no strip up to {1e6 * lengths[-1]:.0f} um long makes it fall")
     lifted = replace(u, friction_mu=0.3, foot_sliding=LIFTED)
     text = (
@@ -271,7 +289,7 @@ def design3_slope(u: Unpublished) -> str:
         f"the nominal 12.5 um strips' Euler load {pcr:.3f} N ({1e3 * p3.design.flexure_width_m:.2f} x "
         f"{1e6 * p3.design.flexure_length_m:.0f} um); with buckling d3 reads {mN(f3(u))}, with rigid strips "
         f"{mN(f3(rigid))}. The weakest strip of the band (1.5 mm x 200 um, Euler load "
-        f"{w3.serial_chain.buckling_load_N:.3f} N) gives {mN(f3(weakest))} (design 1 then peaks at "
+        f"{_euler_load_N(w3):.3f} N) gives {mN(f3(weakest))} (design 1 then peaks at "
         f"{1e3 * d1_best:.2f} mN vs {1e3 * WALK_FORCE_N:.2f} needed); {need}. The plateau flattens the rise but "
         f"the force still grows with sag because the transmission ratio R_tra falls as the foot is pushed up. "
         f"Friction: absorbed by the fit, pressing (the paper's drive ramps), mu 0.3 gives d3 "
@@ -338,7 +356,8 @@ def as_text(r: Reproduction) -> str:
 def as_markdown(r: Reproduction) -> str:
     from hamr_bench.model.readings import readings_markdown
 
-    esc = lambda t: str(t).replace("|", "\\|")
+    def esc(t):
+        return str(t).replace("|", "\\|")
     lines = [
         "# Paper reproduction", "",
         "Generated by `python3 -m hamr_bench paper --markdown` (computed by the model at run time; do not edit).",

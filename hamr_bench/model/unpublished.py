@@ -4,10 +4,10 @@
 
 | quantity | nominal | band | why it is uncertain |
 |---|---|---|---|
-| carbon-fibre modulus E_c | 340 GPa | 200-340 GPa | high-modulus vs standard-modulus prepreg; the paper gives no value |
-| actuator length ratio l_r | 0.0063 | 0.0063-0.1 | Table I prints 0.0063; the optimal-energy-density designs of Wood et al. use ~0.1 |
-| link geometry | designs.GEOMETRIES | each parameter +-1 % (robustness.perturbation_steps) | unpublished; fabrication tolerance |
-| foot friction mu | 0 (frictionless) | 0.2-0.3 | contact.FOOT_FRICTION_MU_BAND; the paper's model has none |
+| carbon-fibre modulus E_c | 340 GPa | 200-340 GPa | high- vs standard-modulus prepreg; the paper gives none |
+| actuator length ratio l_r | 0.0063 | 0.0063-0.1 | Table I prints 0.0063; Wood et al.'s optimal designs use ~0.1 |
+| link geometry | designs.GEOMETRIES | each +-1 % (robustness.perturbation_steps) | unpublished; fabrication |
+| foot friction mu | 0 (frictionless) | 0.2-0.3 | contact.FOOT_FRICTION_MU_BAND; not in the paper's model |
 | flexure planform w, L | 1.75 mm, 150 um | 1.5-2 mm, 100-200 um | flexures.py; sets the strips' Euler load |
 
 Friction and the fit: the paper fitted Table III with a frictionless model to readings taken with whatever friction
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -109,7 +110,7 @@ def draw(n: int, seed: int = 0, base: Unpublished | None = None) -> list[Unpubli
     steps = perturbation_steps(g0, GEOMETRY_TOLERANCE)
     out = []
     for _ in range(n):
-        values = {field: rng.uniform(lo, hi) for field, lo, hi, _, _ in SOURCES.values()}
+        values: dict[str, Any] = {field: rng.uniform(lo, hi) for field, lo, hi, _, _ in SOURCES.values()}
         geometry = {k: getattr(g0, k) + steps[k] * rng.uniform(-1.0, 1.0) for k in GEOMETRY_KEYS}
         try:
             out.append(replace(base, geometry=SliderCrankGeometry(**geometry), **values))

@@ -41,12 +41,15 @@ def test_closed_form_matches_the_vector_statics(side):
 
 def _stick_slip_reading(beta0, mu, scenario):
     """Quasi-static stick-slip: a rigid leg (length L, angle th below horizontal) on a torsional spring k_th about
-    the hip, the foot on a horizontal support with a normal penalty spring k_n and an elastic-perfectly-plastic tangential spring k_t
+    the hip, the foot on a horizontal support with a normal penalty spring k_n and an elastic-perfectly-plastic
+    tangential spring k_t
     (|T| <= mu N, the anchor slides when exceeded). Returns (N, N0) at the end, where N0 is what a frictionless
     support reads for the same leg torque."""
     L, k_th, k_n, k_t = 7e-3, 2e-3, 2e4, 2e4
-    x_of = lambda th: L * np.cos(th)
-    y_of = lambda th: -L * np.sin(th)
+    def x_of(th):
+        return L * np.cos(th)
+    def y_of(th):
+        return -L * np.sin(th)
     th_cmd0 = beta0
     z0 = y_of(beta0)                     # support touching the foot at beta0, unloaded
     anchor = x_of(beta0)
@@ -89,10 +92,10 @@ def _stick_slip_reading(beta0, mu, scenario):
 def test_slide_direction_emerges_from_the_loading(beta_deg, mu):
     beta = np.radians(beta_deg)
     N, N0, th = _stick_slip_reading(beta, mu, "drive")
-    assert N / N0 == pytest.approx(float(friction_reading_ratio(th, mu, PRESSING)), rel=0.02)
+    assert pytest.approx(float(friction_reading_ratio(th, mu, PRESSING)), rel=0.02) == N / N0
     assert N < N0
     N, N0, th = _stick_slip_reading(beta, mu, "raise")
-    assert N / N0 == pytest.approx(float(friction_reading_ratio(th, mu, LIFTED)), rel=0.02)
+    assert pytest.approx(float(friction_reading_ratio(th, mu, LIFTED)), rel=0.02) == N / N0
     assert N > N0
 
 

@@ -12,10 +12,10 @@ from hamr_bench.model.flexures import FlexureStrip, SerialChain, prb_band_N_m_pe
 
 def test_prb_and_euler_numbers_by_hand():
     s = FlexureStrip(12.5e-6, 1.5e-3, 200e-6)
-    I = 1.5e-3 * (12.5e-6) ** 3 / 12                       # 2.44e-19 m^4
-    assert s.prb_stiffness_N_m_per_rad == pytest.approx(2.5e9 * I / 200e-6)
+    second_moment = 1.5e-3 * (12.5e-6) ** 3 / 12                       # 2.44e-19 m^4
+    assert s.prb_stiffness_N_m_per_rad == pytest.approx(2.5e9 * second_moment / 200e-6)
     assert s.prb_stiffness_N_m_per_rad == pytest.approx(3.05e-6, rel=1e-2)
-    assert s.euler_load_N == pytest.approx(np.pi**2 * 2.5e9 * I / 200e-6**2)
+    assert s.euler_load_N == pytest.approx(np.pi**2 * 2.5e9 * second_moment / 200e-6**2)
     assert s.euler_load_N == pytest.approx(0.150, rel=1e-2)
     # 8x at double thickness; clamped-clamped (K = 0.5) four times the guided mode
     assert FlexureStrip(25e-6, 1.5e-3, 200e-6).euler_load_N == pytest.approx(8 * s.euler_load_N)

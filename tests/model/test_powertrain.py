@@ -101,7 +101,8 @@ def test_power_balance_with_buckled_strips():
     Fp = a.tip_force_N(vb, vd, 0.0)
     dact = u - F / ka                                    # actuator tip deflection toward the hip
     short = strip.shortening_m(F)                        # each strip
-    trap = lambda y, x: np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(x))])
+    def trap(y, x):
+        return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(x))])
     strips = 2 * trap(np.where(short > 0, F, 0.0), short)
     phi = tr.joint_angles_rad(p.geometry, p.coupler_m, th)
     stored = 0.5 * ka * dact**2 + 0.5 * F**2 / ks + strips + 0.5 * np.sum(p.kappa[:, None] * phi**2, axis=0)
@@ -133,7 +134,8 @@ def test_power_balance_conserves_energy_along_quasi_static_path(pts, d):
     phi = tr.joint_angles_rad(p.geometry, p.coupler_m, th)
     stored = 0.5 * ka * dact**2 + 0.5 * ks * (dtra - dact) ** 2 + 0.5 * np.sum(p.kappa[:, None] * phi**2, axis=0)
     F = p.foot_force_N(vb, vd, h)
-    trap = lambda y, x: float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
+    def trap(y, x):
+        return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
     W_act = trap(Fp, dact)                 # piezo force through the actuator tip's own travel
     W_leg = trap(F, -h)                    # foot pushes down with F while moving down by -dh
     # the piezo force is a function of the drive, not a potential: its work is exact only as the line integral
