@@ -193,10 +193,17 @@ def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: flo
     if jobs <= 1 and scheduler is None:
         for a in args:
             take(_trial_worker(a))
+    elif scheduler is None:
+        # local processes, each trial taken as it ends (a long run shows progress and keeps what it finished)
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for future in as_completed([pool.submit(_trial_worker, a) for a in args]):
+                take(future.result())
     else:
         from analysis.parallel import parallel_map
 
-        for t in parallel_map(_trial_worker, args, jobs=jobs, scheduler=scheduler):
+        for t in parallel_map(_trial_worker, args, scheduler=scheduler):
             take(t)
     out = score(done)
     out["errors"] = errors
