@@ -42,8 +42,8 @@ GEOMETRIES: dict[str, SliderCrankGeometry] = {
                                leg_length_m=7.01e-3, leg_angle0_rad=0.555),
     "printed": SliderCrankGeometry(crank_m=0.475e-3, coupler_m=1.719e-3, offset_m=0.997e-3, theta_fab_rad=1.350,
                                    leg_length_m=10.51e-3, leg_angle0_rad=0.885),
-    "mixed": SliderCrankGeometry(crank_m=0.347e-3, coupler_m=0.566e-3, offset_m=0.021e-3, theta_fab_rad=1.070,
-                                 leg_length_m=7.01e-3, leg_angle0_rad=0.555),
+    "mixed": SliderCrankGeometry(crank_m=0.600e-3, coupler_m=0.601e-3, offset_m=0.385e-3, theta_fab_rad=2.863,
+                                 leg_length_m=8.935e-3, leg_angle0_rad=0.770),
 }
 GEOMETRY = GEOMETRIES[DEFAULT_KAPPA_UNITS]
 
