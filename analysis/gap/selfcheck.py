@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -166,6 +167,26 @@ def score_raw(raw_path: str | Path) -> dict[str, Any]:
     return out
 
 
+def _run_trials(args: list[tuple[int, float, float, int]], jobs: int, scheduler: Any,
+                take: Callable[[Trial | str], None]) -> None:
+    """Each trial's result to `take` as it ends: in this process, in local processes, or on a Dask cluster."""
+    if jobs <= 1 and scheduler is None:
+        for a in args:
+            take(_trial_worker(a))
+    elif scheduler is None:
+        # as each ends, not in order: a long run shows progress and its raw file keeps what finished
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for future in as_completed([pool.submit(_trial_worker, a) for a in args]):
+                take(future.result())
+    else:
+        from analysis.parallel import parallel_map
+
+        for t in parallel_map(_trial_worker, args, scheduler=scheduler):
+            take(t)
+
+
 def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: float = 0.15,
               decoy_fraction: float = 0.1, progress: bool = False, raw_path: str | None = None,
               scheduler: Any = None, specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
@@ -190,21 +211,7 @@ def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: flo
             shown = t if isinstance(t, str) else f"{t.kind} {'+'.join(t.truth + t.decoys) or '-'} -> {t.best}"
             print(f"trial {n}/{trials}: {shown}", flush=True)
 
-    if jobs <= 1 and scheduler is None:
-        for a in args:
-            take(_trial_worker(a))
-    elif scheduler is None:
-        # local processes, each trial taken as it ends (a long run shows progress and keeps what it finished)
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            for future in as_completed([pool.submit(_trial_worker, a) for a in args]):
-                take(future.result())
-    else:
-        from analysis.parallel import parallel_map
-
-        for t in parallel_map(_trial_worker, args, scheduler=scheduler):
-            take(t)
+    _run_trials(args, jobs, scheduler, take)
     out = score(done)
     out["errors"] = errors
     out["seed"] = seed
