@@ -1,6 +1,7 @@
 """`python3 -m benchmarks.external_lab generate --seed S --cases N --out DIR` and
 `python3 -m benchmarks.external_lab score DIR [--layout cases|cases-per-specimen] [--work DIR] [--root DIR]
-[--case ID ...] [--timeout S]`: make another lab's actuator data, and score hamr-bench's gap diagnosis on it."""
+[--case ID ...] [--timeout S]`: make another lab's actuator data, and score hamr-bench's gap diagnosis on
+it."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ def main(argv: list[str] | None = None) -> int:
     gen.add_argument("--seed", type=int, required=True, help="first case seed (case k uses seed + k)")
     gen.add_argument("--cases", type=int, default=20, help="number of cases (default 20)")
     gen.add_argument("--out", type=Path, required=True, help="output directory")
-    sc = sub.add_parser("score", help="import and diagnose every case as a user would, compare with the manifest")
+    sc = sub.add_parser("score", help="import and diagnose every case as a user would; compare")
     sc.add_argument("dir", type=Path, help="a directory written by `generate`")
     sc.add_argument("--layout", choices=("cases", "cases-per-specimen"), default="cases",
                     help="files with a specimen column (default) or one specimen per file")

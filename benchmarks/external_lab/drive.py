@@ -1,6 +1,6 @@
 """The other lab's drive: trapezoids between ground and V_bias with the lab's own timing (dwells, ramps, cycle
-counts, repetitions, possibly two ramp rates), the bias switched on before the recording starts, and a high-voltage
-amplifier that rounds the corners (first order) and, as a decoy, droops as it warms."""
+counts, repetitions, possibly two ramp rates), the bias switched on before the recording starts, and a
+high-voltage amplifier that rounds the corners (first order) and, as a decoy, droops as it warms."""
 
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ class DriveTiming:
         return self.lead_s + sum(reps) + self.pause_s * (self.repetitions - 1) + self.tail_s
 
 
-def drive_command(timing: DriveTiming, bias_V: float, rate_Hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def drive_command(timing: DriveTiming, bias_V: float, rate_Hz: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, V_drive command, driven mask) on a uniform grid from -pre_roll to the block's end (t = 0: first
     recorded sample). Driven = inside a trapezoid cycle."""
     corners_t = [-timing.pre_roll_s, 0.0, timing.lead_s]
@@ -65,8 +66,8 @@ def bias_waveform(t: np.ndarray, bias_V: float, ramp_s: float = 0.2) -> np.ndarr
 
 @dataclass(frozen=True)
 class Amplifier:
-    """First-order output stage: rounded corners on fast ramps (a TREK-class amplifier slews far faster than any
-    ramp here, so no slew limit)."""
+    """First-order output stage: rounded corners on fast ramps (a TREK-class amplifier slews far faster than
+    any ramp here, so no slew limit)."""
 
     tau_s: float
 
@@ -78,10 +79,10 @@ class Amplifier:
 
 @dataclass(frozen=True)
 class AmplifierDroop:
-    """Decoy: the amplifier's gain sags as its output stage warms. While a block runs, the thermal state relaxes
-    with tau_s toward (V_bias / 250 V)^2 (the dissipation of a high-voltage stage grows with the output swing
-    squared); between blocks it cools toward 0. Gain = 1 - max_droop x state. The state carries over the session,
-    so the files measured later, and at higher bias, droop more."""
+    """Decoy: the amplifier's gain sags as its output stage warms. While a block runs, the thermal state
+    relaxes with tau_s toward (V_bias / 250 V)^2 (the dissipation of a high-voltage stage grows with the
+    output swing squared); between blocks it cools toward 0. Gain = 1 - max_droop x state. The state carries
+    over the session, so the files measured later, and at higher bias, droop more."""
 
     max_droop: float
     tau_s: float

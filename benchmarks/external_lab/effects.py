@@ -1,17 +1,18 @@
-"""Material-side effects of the other lab's actuators, each in a form that is in neither column of the project's
-effect-forms table (coord notes forms.md): they act on one plate's voltage and return the "effective" voltage
-that, times the plate's nominal coefficient, gives its share of the tip deflection.
+"""Material-side effects of the other lab's actuators, each in a form that is in neither column of the
+project's effect-forms table (coord notes forms.md): they act on one plate's voltage and return the
+"effective" voltage that, times the plate's nominal coefficient, gives its share of the tip deflection.
 
-- hysteresis: a Krasnosel'skii-Pokrovskii operator, a weighted sum of relays with finite-slope (ramp) switching
-  over a NON-separable density of (centre, width): loops close at the reversal points and widen with amplitude
-  (wide kernels only switch under large swings); not a play/Prandtl-Ishlinskii sum, not Bouc-Wen, not a
-  Preisach density through an Everett function.
+- hysteresis: a Krasnosel'skii-Pokrovskii operator, a weighted sum of relays with finite-slope (ramp)
+  switching over a NON-separable density of (centre, width): loops close at the reversal points and widen with
+  amplitude (wide kernels only switch under large swings); not a play/Prandtl-Ishlinskii sum, not Bouc-Wen,
+  not a Preisach density through an Everett function.
 - creep: Kohlrausch stretched exponential, each voltage increment relaxing as 1 - exp(-(t/tau)^beta).
 - field-dependent d31: (a) Rayleigh-type amplitude law, the gain set by the largest field the plate has seen
-  since the bias came on (not the instantaneous field); (b) a cubic law in the instantaneous field, either sign.
+  since the bias came on (not the instantaneous field); (b) a cubic law in the instantaneous field, either
+  sign.
 
-Decoys (no candidate in any diagnosis library): depolarisation of a plate by a reverse field between runs, and a
-PZT modulus that falls as the actuator self-heats while it is driven.
+Decoys (no candidate in any diagnosis library): depolarisation of a plate by a reverse field between runs, and
+a PZT modulus that falls as the actuator self-heats while it is driven.
 """
 
 from __future__ import annotations
@@ -27,10 +28,10 @@ FIELD_REF_V_PER_UM = 2.0
 # ------------------------------------------------------------------------------------------------- hysteresis
 @dataclass(frozen=True)
 class KPHysteresis:
-    """Krasnosel'skii-Pokrovskii hysteresis of one plate's response. `share`: the fraction of the response that
-    goes through the kernels (the rest is reversible); `width_scale`: mean kernel width in units of V_REF;
-    `width_skew`: how the kernel widths grow with the kernel centre (the non-separable part of the density);
-    `ramp`: switching width of a kernel (finite slope after a reversal)."""
+    """Krasnosel'skii-Pokrovskii hysteresis of one plate's response. `share`: the fraction of the response
+    that goes through the kernels (the rest is reversible); `width_scale`: mean kernel width in units of
+    V_REF; `width_skew`: how the kernel widths grow with the kernel centre (the non-separable part of the
+    density); `ramp`: switching width of a kernel (finite slope after a reversal)."""
 
     share: float
     width_scale: float
@@ -40,16 +41,16 @@ class KPHysteresis:
     def _kernels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         centres = np.linspace(-0.15, 1.15, 41)
         widths = np.geomspace(0.004, 0.9, 14)
-        c, r = np.meshgrid(centres, widths, indexing="ij")
-        c, r = c.ravel(), r.ravel()
+        c_grid, r_grid = np.meshgrid(centres, widths, indexing="ij")
+        c, r = c_grid.ravel(), r_grid.ravel()
         local_scale = self.width_scale * np.clip(1.0 + self.width_skew * (c - 0.5), 0.2, None)
         weight = np.exp(-r / local_scale) * r   # r: the geometric spacing of the width grid
         ramp = np.minimum(r, self.ramp)
         return c - r / 2.0, c + r / 2.0, ramp, weight / weight.sum()
 
     def _run(self, u: np.ndarray) -> np.ndarray:
-        """Kernel sum for the input u (plate voltage / V_REF), from the state left by a fall from full drive to 0
-        (the poling history). Vectorised over monotone pieces: on a rising piece a kernel's state is
+        """Kernel sum for the input u (plate voltage / V_REF), from the state left by a fall from full drive
+        to 0 (the poling history). Vectorised over monotone pieces: on a rising piece a kernel's state is
         max(state at the piece's start, up-ramp(u)), on a falling piece min(state, down-ramp(u))."""
         down_at, up_at, ramp, weight = self._kernels()
 
@@ -66,7 +67,7 @@ class KPHysteresis:
         direction = np.sign(np.where(np.abs(step) > 1e-12, step, 0.0))
         # pieces of constant direction: [bounds[k], bounds[k + 1]) in `step` indices
         bounds = np.r_[0, np.flatnonzero(np.diff(direction)) + 1, step.size]
-        for i, j in zip(bounds[:-1], bounds[1:]):
+        for i, j in zip(bounds[:-1], bounds[1:], strict=True):
             piece = u[i + 1:j + 1]
             if direction[i] == 0:
                 out[i + 1:j + 1] = state @ weight
@@ -94,8 +95,8 @@ class KPHysteresis:
         return (1.0 - self.share) * v_plate + self.share * V_REF * p
 
     def loop_width(self, amplitude_V: float) -> float:
-        """Largest gap between the falling and the rising branch of a 0 -> amplitude -> 0 cycle, as a fraction of
-        the response's span (the figure quoted for PZT: ~2 % small signal, 10-15 % at full drive)."""
+        """Largest gap between the falling and the rising branch of a 0 -> amplitude -> 0 cycle, as a fraction
+        of the response's span (the figure quoted for PZT: ~2 % small signal, 10-15 % at full drive)."""
         n = 401
         v = np.r_[np.linspace(0.0, amplitude_V, n), np.linspace(amplitude_V, 0.0, n)[1:],
                   np.linspace(0.0, amplitude_V, n)[1:], np.linspace(amplitude_V, 0.0, n)[1:]]
@@ -119,8 +120,8 @@ class KohlrauschCreep:
         return 1.0 + self.amplitude * (1.0 - np.exp(-((t / self.tau_s) ** self.beta)))
 
     def per_decade(self) -> float:
-        """Mean growth per decade of time between 0.1 s and 10 s after a step, relative to the response at 0.1 s
-        (the "1-2 % per decade" figure)."""
+        """Mean growth per decade of time between 0.1 s and 10 s after a step, relative to the response at 0.1
+        s (the "1-2 % per decade" figure)."""
         lo, hi = self.step_response(np.array([0.1, 10.0]))
         return float((hi - lo) / lo / 2.0)
 
@@ -134,11 +135,12 @@ class KohlrauschCreep:
         return e + fftconvolve(increments, kernel)[:e.size]
 
 
-# ------------------------------------------------------------------------------------------- field-dependent d31
+# ------------------------------------------------------------------------------------------- field-dependent
+# d31
 @dataclass(frozen=True)
 class RayleighAmplitudeD31:
-    """Rayleigh-type rise: d31 = d31_0 (1 + alpha E_amp / 2 V/um), E_amp the largest field the plate has seen since
-    its bias came on (a property of the cycling amplitude, not of the instantaneous field)."""
+    """Rayleigh-type rise: d31 = d31_0 (1 + alpha E_amp / 2 V/um), E_amp the largest field the plate has seen
+    since its bias came on (a property of the cycling amplitude, not of the instantaneous field)."""
 
     alpha: float
 
@@ -152,8 +154,8 @@ class RayleighAmplitudeD31:
 
 @dataclass(frozen=True)
 class CubicFieldD31:
-    """d31 = d31_0 (1 + b (E / E_ref)^3) in the instantaneous field, b of either sign (a rise, or a droop toward
-    saturation near the top of the field range)."""
+    """d31 = d31_0 (1 + b (E / E_ref)^3) in the instantaneous field, b of either sign (a rise, or a droop
+    toward saturation near the top of the field range)."""
 
     b: float
     field_ref_V_per_um: float
@@ -169,8 +171,8 @@ class CubicFieldD31:
 # ----------------------------------------------------------------------------------------------------- decoys
 @dataclass(frozen=True)
 class ReverseFieldDepolarisation:
-    """Between runs the lab parks the drive at V_bias / 2 (the actuator straight) and switches the bias off first:
-    the top plate then sees -V_bias / 2, a reverse field. Each such event removes the fraction
+    """Between runs the lab parks the drive at V_bias / 2 (the actuator straight) and switches the bias off
+    first: the top plate then sees -V_bias / 2, a reverse field. Each such event removes the fraction
     max_loss / (1 + exp(-(E_rev - coercive) / spread)) of that plate's remaining polarisation."""
 
     max_loss: float

@@ -1,8 +1,8 @@
 """Cases to files: for each case, one CSV per test x layer count x bias voltage in the documented trace format
 (docs/log-format.md, "Trace": time_s, voltage_V, stage_position_m, force_N, displacement_m) plus a `specimen`
 column holding every specimen's block, and a second layout with one specimen per file and no `specimen` column
-(for an importer that does not read the column yet). Each case directory also gets `files.csv`, what a lab would
-send with its data (file, test, layer count, bias set-point, specimens): no truth. The truth goes to
+(for an importer that does not read the column yet). Each case directory also gets `files.csv`, what a lab
+would send with its data (file, test, layer count, bias set-point, specimens): no truth. The truth goes to
 `manifest.json` beside the case directories.
 
 Layout of OUT:
@@ -36,9 +36,9 @@ def _stage_cell(case: Case, test: str) -> str:
 
 
 def block_lines(case: Case, block: sim.Block, data: sim.BlockData) -> list[str]:
-    """CSV lines of one block (no specimen cell); times on the session clock or from 0, as the case's lab writes
-    them. One format per row: columns never measured in this block are empty in the format itself, a blank
-    reading (NaN) prints as 'nan' and is blanked afterwards."""
+    """CSV lines of one block (no specimen cell); times on the session clock or from 0, as the case's lab
+    writes them. One format per row: columns never measured in this block are empty in the format itself, a
+    blank reading (NaN) prints as 'nan' and is blanked afterwards."""
     t = data.time_s + (block.session_start_s if case.time_layout == "continuous" else 0.0)
     stage = _stage_cell(case, block.test)
     stage_fmt = stage if case.stage_style == "constant" else ""
@@ -93,8 +93,8 @@ def write_case(case: Case, out: Path) -> dict[str, Any]:
         for blk, lines in per_block:
             name = f"{stem}_{blk.specimen.label}.csv"
             _write(dirs["cases-per-specimen"] / name, HEADER, lines)
-            files["cases-per-specimen"].append({"file": name, "test": test, "layers": layers, "bias_V": nominal,
-                                                "specimens": [blk.specimen.label]})
+            files["cases-per-specimen"].append({"file": name, "test": test, "layers": layers,
+                                                "bias_V": nominal, "specimens": [blk.specimen.label]})
     for layout, d in dirs.items():
         index = [f"{f['file']},{f['test']},{f['layers']},{f['bias_V']:.0f},{';'.join(f['specimens'])}"
                  for f in files[layout]]

@@ -2,8 +2,9 @@
 force) against the force sensor, through whatever series springs the rig has, solved exactly for the force.
 
 Series springs, each a deflection as a function of force (forms in neither column of the project's table):
-- base compliance: a hyperbolic-sine hardening spring, F = k0 u0 sinh(u / u0) (soft at small load, stiffening),
-  or a push/pull-asymmetric spring whose compliance blends between its push and pull values through tanh(F / F0);
+- base compliance: a hyperbolic-sine hardening spring, F = k0 u0 sinh(u / u0) (soft at small load,
+  stiffening), or a push/pull-asymmetric spring whose compliance blends between its push and pull values
+  through tanh(F / F0);
 - sensor compliance: the sensor's own linear spring in series with a Hertzian contact of the tip on the sensor
   button (deflection (F / K_H)^(2/3) while pushing: compliant at light load, stiffer at heavy).
 Imperfect grounding is not here: it is the compliant clamp of the cantilever itself (physics.py).
@@ -57,9 +58,9 @@ class SensorContact:
 
 def contact_force(free_m: np.ndarray, compliance_m_per_N: np.ndarray | float, gap_m: float,
                   series: Sequence[Deflection], push_only: bool) -> np.ndarray:
-    """Force the tip exerts on the sensor: the F solving free - gap = F C + sum(u_j(F)), every term increasing in
-    F, so the root lies between 0 and the rigid-support force (free - gap) / C; found by bisection (vectorised).
-    A push-only sensor (the tip merely rests on it) reads 0 where the tip would pull away."""
+    """Force the tip exerts on the sensor: the F solving free - gap = F C + sum(u_j(F)), every term increasing
+    in F, so the root lies between 0 and the rigid-support force (free - gap) / C; found by bisection
+    (vectorised). A push-only sensor (the tip merely rests on it) reads 0 where the tip would pull away."""
     reach = free_m - gap_m
     c = np.broadcast_to(np.asarray(compliance_m_per_N, float), reach.shape)
     rigid = reach / c

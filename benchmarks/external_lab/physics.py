@@ -1,16 +1,17 @@
-"""The bimorph written from the published equations: a layer-stack beam section (neutral axis, bending rigidity,
-each plate's piezoelectric moment) and a finite-element tapered cantilever with a rigid tip extension, clamped
-rigidly or held by a compliant clamp (an elastic foundation under the clamped length).
+"""The bimorph written from the published equations: a layer-stack beam section (neutral axis, bending
+rigidity, each plate's piezoelectric moment) and a finite-element tapered cantilever with a rigid tip
+extension, clamped rigidly or held by a compliant clamp (an elastic foundation under the clamped length).
 
 Beam theory, not the project's closed form: the section is summed layer by layer about the modulus-weighted
-neutral axis, so plates of different thickness or modulus are allowed (the bias-drive-ground zero then moves off
-V_bias / 2), and the cantilever is solved by Hermite beam elements, so a depoled edge band or a compliant clamp
-enter as what they are. For two equal plates and a rigid clamp it reduces to the laminate closed form of the
-physics notes (D, F_b, delta, G_F, G_D); tests/benchmarks/test_external_lab.py checks that limit against an
-independent quadrature and against the project's model.
+neutral axis, so plates of different thickness or modulus are allowed (the bias-drive-ground zero then moves
+off V_bias / 2), and the cantilever is solved by Hermite beam elements, so a depoled edge band or a compliant
+clamp enter as what they are. For two equal plates and a rigid clamp it reduces to the laminate closed form of
+the physics notes (D, F_b, delta, G_F, G_D); tests/benchmarks/test_external_lab.py checks that limit against
+an independent quadrature and against the project's model.
 
-Sign convention (the bias-drive-ground wiring of the paper's Fig. 6): the bottom plate sees V_drive and pushes the
-tip toward the force sensor (+), the top plate sees V_bias - V_drive and pulls it back (-). SI units throughout.
+Sign convention (the bias-drive-ground wiring of the paper's Fig. 6): the bottom plate sees V_drive and pushes
+the tip toward the force sensor (+), the top plate sees V_bias - V_drive and pulls it back (-). SI units
+throughout.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-# Table I, "effective" column (Ozcan, Baisch, Wood, ICRA 2014): the values the paper's model reproduces the data
-# with. A per-layer cured carbon-fibre thickness; the CF modulus is the physics notes' assumption.
+# Table I, "effective" column (Ozcan, Baisch, Wood, ICRA 2014): the values the paper's model reproduces the
+# data with. A per-layer cured carbon-fibre thickness; the CF modulus is the physics notes' assumption.
 TABLE_I_EFFECTIVE = {
     "cf_layer_m": 30e-6,
     "pzt_thickness_m": 155e-6,
@@ -58,7 +59,8 @@ class Build:
     width_ratio: float
     length_ratio: float
     cf_modulus_Pa: float = CF_MODULUS_PA
-    # Laser-cut heat-affected band along each cut edge: depoled (no piezo moment), its PZT softened by a factor.
+    # Laser-cut heat-affected band along each cut edge: depoled (no piezo moment), its PZT softened by a
+    # factor.
     edge_band_m: float = 0.0
     edge_band_modulus_factor: float = 1.0
     # Grounding: an electroded length inside the clamp, held by an elastic foundation (N/m per m of length);
@@ -79,7 +81,8 @@ def nominal_build(layers: int) -> Build:
 
 @dataclass(frozen=True)
 class Section:
-    """Per unit width: bending rigidity about the neutral axis (N m) and each plate's moment per volt (N/V)."""
+    """Per unit width: bending rigidity about the neutral axis (N m) and each plate's moment per volt
+    (N/V)."""
 
     rigidity_N_m: float
     moment_bottom_N_per_V: float
@@ -87,9 +90,9 @@ class Section:
 
 
 def section(b: Build, pzt_modulus_scale: float = 1.0, depoled: bool = False) -> Section:
-    """Sum over the three layers (bottom PZT, CF, top PZT) about the modulus-weighted centroid. A plate's in-plane
-    piezo force per width is d31 E V (field V/t times area t), acting at its mid-plane: its moment about the
-    neutral axis is that force times the lever."""
+    """Sum over the three layers (bottom PZT, CF, top PZT) about the modulus-weighted centroid. A plate's
+    in-plane piezo force per width is d31 E V (field V/t times area t), acting at its mid-plane: its moment
+    about the neutral axis is that force times the lever."""
     eb, et = b.modulus_bottom_Pa * pzt_modulus_scale, b.modulus_top_Pa * pzt_modulus_scale
     t = np.array([b.pzt_bottom_m, b.cf_thickness_m, b.pzt_top_m])
     e = np.array([eb, b.cf_modulus_Pa, et])
@@ -130,18 +133,20 @@ def _width(b: Build, x: np.ndarray) -> np.ndarray:
 
 def _hermite(xi: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Shape functions and their second x-derivatives at local coordinates xi (1-D) for elements of lengths h
-    (elements, 1): arrays (elements, points, 4), the four element DOFs being deflection and rotation at each end."""
+    (elements, 1): arrays (elements, points, 4), the four element DOFs being deflection and rotation at each
+    end."""
     xi, h = np.broadcast_arrays(xi[None, :], h)
     n = np.stack([1 - 3 * xi**2 + 2 * xi**3, h * (xi - 2 * xi**2 + xi**3), 3 * xi**2 - 2 * xi**3,
                   h * (-(xi**2) + xi**3)], axis=-1)
-    d2 = np.stack([-6 + 12 * xi, h * (-4 + 6 * xi), 6 - 12 * xi, h * (-2 + 6 * xi)], axis=-1) / h[..., None] ** 2
+    d2 = np.stack([-6 + 12 * xi, h * (-4 + 6 * xi), 6 - 12 * xi, h * (-2 + 6 * xi)], axis=-1)
+    d2 /= h[..., None] ** 2
     return n, d2
 
 
 def solve_cantilever(b: Build, pzt_modulus_scale: float = 1.0) -> Coefficients:
-    """Static Euler-Bernoulli solution by Hermite elements: stiffness from the local rigidity x width (the edge
-    bands at their own rigidity), piezo loads from the distributed plate moments, a Winkler foundation under
-    the clamped length when the clamp is compliant, the rigid extension l_r l carrying the tip load."""
+    """Static Euler-Bernoulli solution by Hermite elements: stiffness from the local rigidity x width (the
+    edge bands at their own rigidity), piezo loads from the distributed plate moments, a Winkler foundation
+    under the clamped length when the clamp is compliant, the rigid extension l_r l carrying the tip load."""
     full = section(b, pzt_modulus_scale)
     band = section(replace(b, modulus_bottom_Pa=b.modulus_bottom_Pa * b.edge_band_modulus_factor,
                            modulus_top_Pa=b.modulus_top_Pa * b.edge_band_modulus_factor),
@@ -173,10 +178,8 @@ def solve_cantilever(b: Build, pzt_modulus_scale: float = 1.0) -> Coefficients:
     l_ext = b.length_ratio * b.length_m
     loads[-2, 2] = 1.0
     loads[-1, 2] = l_ext
-    if compliant_clamp:
-        free = np.arange(n_dof)
-    else:
-        free = np.arange(2, n_dof)   # root node held: no deflection, no rotation
+    # a rigid clamp holds the root node (no deflection, no rotation); a compliant one holds nothing
+    free = np.arange(n_dof) if compliant_clamp else np.arange(2, n_dof)
     u = np.zeros((n_dof, 3))
     u[free] = _solve_banded_spd(k[np.ix_(free, free)], loads[free])
     tip = u[-2] + l_ext * u[-1]
@@ -184,9 +187,9 @@ def solve_cantilever(b: Build, pzt_modulus_scale: float = 1.0) -> Coefficients:
 
 
 def _solve_banded_spd(k: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve the symmetric positive definite beam system in banded storage (two-node elements with two DOFs per
-    node couple DOFs at most 3 apart): a dense solve is slower and, under a threaded BLAS on a busy machine, far
-    slower."""
+    """Solve the symmetric positive definite beam system in banded storage (two-node elements with two DOFs
+    per node couple DOFs at most 3 apart): a dense solve is slower and, under a threaded BLAS on a busy
+    machine, far slower."""
     from scipy.linalg import solveh_banded
 
     u = 3

@@ -1,17 +1,18 @@
-"""The scorer: run hamr-bench on every case exactly as a user would, then compare its answer with the manifest.
+"""The scorer: run hamr-bench on every case exactly as a user would, then compare its answer with the
+manifest.
 
-Per case: `python3 -m hamr_bench import trace FILE.csv --protocol actuator --layers N --out X.mcap` for every CSV
-(layer count from the lab's files.csv), then `python3 -m hamr_bench gap DIR --json` on the directory of the
-imported recordings. A refusal (an import or the diagnosis stopping with an error) is a finding: the case is
-scored `refused` with hamr-bench's own one-line reason, and the scorer goes on.
+Per case: `python3 -m hamr_bench import trace FILE.csv --protocol actuator --layers N --out X.mcap` for every
+CSV (layer count from the lab's files.csv), then `python3 -m hamr_bench gap DIR --json` on the directory of
+the imported recordings. A refusal (an import or the diagnosis stopping with an error) is a finding: the case
+is scored `refused` with hamr-bench's own one-line reason, and the scorer goes on.
 
 Figures (effects without a candidate in today's library are reported, not scored as misses):
 - single-effect cases: top-1 = the diagnosis names exactly the effect's candidate;
 - multi-effect cases: each present effect named (recall), and every one named in the case;
 - nulls: false attributions (anything named);
 - decoys: left unexplained (nothing named);
-plus a confusion matrix (true effect x answer). `ambiguous` answers are counted apart, with whether the set they
-name holds the truth.
+plus a confusion matrix (true effect x answer). `ambiguous` answers are counted apart, with whether the set
+they name holds the truth.
 """
 
 from __future__ import annotations
@@ -30,25 +31,28 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[2]
 
 # The one mapping table: the generator's effect -> the diagnosis candidate names that mean the same physical
-# effect. Today's names (analysis/gap/library.py CANDIDATES) first; names the diagnosis may add for effects it
-# has no candidate for yet (issue 16: effective length for grounding, thickness and modulus offsets) after. A name
-# counts as "in the library" for a case when it appears in that case's ranking.
+# effect. Main's names (analysis/gap/library.py CANDIDATES) and the names the issue-16 diagnosis adds
+# (/work/coord/notes/gap.md: grounding_lengthening, pzt_thickness, pzt_modulus). A longer active length and a
+# compliant clamp are one observable, an effective length (the paper: "effective length to be greater due to
+# imperfect mechanical grounding"), so both map to it. A name counts as "in the library" for a case when it
+# appears in that case's ranking.
 CANDIDATE_NAMES: dict[str, tuple[str, ...]] = {
     "hysteresis": ("hysteresis",),
     "creep": ("creep",),
     "d31_field": ("field_dependent_d31",),
     "drift": ("sensor_drift",),
     "base_compliance": ("base_compliance",),
-    "grounding": ("effective_length", "imperfect_grounding", "grounding"),
     "sensor_compliance": ("sensor_compliance",),
     "width_loss": ("width_loss",),
-    "pzt_thickness": ("pzt_thickness", "thickness"),
-    "pzt_modulus": ("pzt_modulus", "modulus", "effective_modulus"),
-    "length": ("effective_length", "length"),
+    "grounding": ("grounding_lengthening",),
+    "pzt_thickness": ("pzt_thickness",),
+    "pzt_modulus": ("pzt_modulus",),
+    "length": ("grounding_lengthening",),
 }
 # Candidates the issue says blocked force and free stroke alone cannot tell apart (a secondary, class-level
 # top-1 counts an answer inside the truth's class).
-SAME_SIGNATURE: tuple[frozenset[str], ...] = (frozenset({"base_compliance", "sensor_compliance", "width_loss"}),)
+SAME_SIGNATURE: tuple[frozenset[str], ...] = (
+    frozenset({"base_compliance", "sensor_compliance", "width_loss"}),)
 
 
 @dataclass
@@ -69,8 +73,8 @@ class CaseResult:
 
 def _run(args: list[str], cwd: Path, timeout_s: float) -> tuple[int, str, str]:
     try:
-        p = subprocess.run([sys.executable, "-m", "hamr_bench", *args], cwd=cwd, capture_output=True, text=True,
-                           timeout=timeout_s)
+        p = subprocess.run([sys.executable, "-m", "hamr_bench", *args], cwd=cwd, capture_output=True,
+                           text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
         return -1, "", f"timed out after {timeout_s:.0f} s"
     return p.returncode, p.stdout, p.stderr
@@ -90,7 +94,8 @@ def read_index(case_dir: Path) -> list[dict[str, str]]:
 
 def run_case(case_dir: Path, work: Path, root: Path, timeout_s: float) -> tuple[dict[str, Any] | None, str,
                                                                                list[str]]:
-    """Import every CSV, then diagnose the imported directory: (gap JSON or None, refusal reason, refused files)."""
+    """Import every CSV, then diagnose the imported directory: (gap JSON or None, refusal reason, refused
+    files)."""
     if work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
@@ -99,8 +104,8 @@ def run_case(case_dir: Path, work: Path, root: Path, timeout_s: float) -> tuple[
     for row in read_index(case_dir):
         csv_path = (case_dir / row["file"]).resolve()
         out = work / (Path(row["file"]).stem + ".mcap")
-        rc, _, err = _run(["import", "trace", str(csv_path), "--protocol", "actuator", "--layers", row["layers"],
-                           "--out", str(out)], root, timeout_s)
+        rc, _, err = _run(["import", "trace", str(csv_path), "--protocol", "actuator",
+                           "--layers", row["layers"], "--out", str(out)], root, timeout_s)
         if rc != 0:
             reason = _reason(err)
             refused_files.append(f"{row['file']}: {reason}")
@@ -117,36 +122,39 @@ def run_case(case_dir: Path, work: Path, root: Path, timeout_s: float) -> tuple[
         return None, "gap: --json output is not JSON", refused_files
 
 
+def _entries(out: dict[str, Any]) -> list[dict[str, Any]]:
+    """The diagnosis's verdicts: the `named` list where there is one (issue 16), else the ranking (main)."""
+    named = out.get("named")
+    source = named if isinstance(named, list) else out.get("ranking") or []
+    return [e for e in source if isinstance(e, dict)]
+
+
 def named_effects(out: dict[str, Any]) -> list[str]:
-    """Every effect the diagnosis names: `best` (a pair "a+b" names both), entries ranked `attributed`, and any
-    list of named effects a later diagnosis adds (keys `effects`, `named`, `attributed`)."""
+    """Every effect the diagnosis names as attributed: `best` (a pair "a+b" names both) and every entry whose
+    verdict is `attributed` ("within tolerance", "ambiguous" and "unexplained" name nothing)."""
     names: list[str] = []
     best = out.get("best")
     if isinstance(best, str) and best:
         names += best.split("+")
-    for entry in out.get("ranking") or []:
-        if isinstance(entry, dict) and entry.get("verdict") == "attributed":
+    for entry in _entries(out):
+        if entry.get("verdict") == "attributed":
             names += str(entry.get("effect", "")).split("+")
-    for key in ("effects", "named", "attributed"):
-        value = out.get(key)
-        if isinstance(value, list):
-            for v in value:
-                name = v if isinstance(v, str) else (v.get("effect") or v.get("name")) if isinstance(v, dict) else None
-                if name and (not isinstance(v, dict) or v.get("verdict", "attributed") == "attributed"):
-                    names += str(name).split("+")
     return sorted({n for n in names if n})
 
 
 def read_answer(result: CaseResult, out: dict[str, Any]) -> None:
     ranking = [e for e in out.get("ranking") or [] if isinstance(e, dict)]
-    result.best = out.get("best")
+    result.best = out.get("best") if isinstance(out.get("best"), str) else None
     result.named = named_effects(out)
     result.library = sorted({n for e in ranking for n in str(e.get("effect", "")).split("+") if n})
-    if ranking:
-        top = ranking[0]
-        result.verdict = str(top.get("verdict", ""))
-        if result.verdict == "ambiguous":
-            result.ambiguous_set = sorted({*str(top.get("effect", "")).split("+"), *top.get("confusable_with", [])})
+    entries = _entries(out)
+    if entries:
+        result.verdict = str(entries[0].get("verdict", ""))
+    ambiguous: set[str] = set()
+    for entry in entries:
+        if entry.get("verdict") == "ambiguous":
+            ambiguous |= {*str(entry.get("effect", "")).split("+"), *(entry.get("confusable_with") or [])}
+    result.ambiguous_set = sorted(ambiguous)
 
 
 def candidates_for(effect: str, library: list[str]) -> list[str]:
@@ -166,14 +174,22 @@ def judge(r: CaseResult) -> str:
     if r.kind == "single":
         if not present:
             return "no-candidate:" + ("named " + "+".join(r.named) if r.named else "unexplained")
-        if r.named == present:
-            return "top1-correct"
+        if top1(r, present[0]):
+            extra = len(set(r.named) - {present[0]})
+            return "top1-correct" + (f" (+{extra} extra named)" if extra else "")
         if r.ambiguous_set and present[0] in r.ambiguous_set:
             return "ambiguous-with-truth"
+        if present[0] in r.named:
+            return "named-not-first"
         return "wrong" if r.named else "missed"
     hit = sum(c in r.named for c in present)
     return f"named {hit}/{len(present)}" + (f" (+{len(set(r.named) - set(present))} extra)"
                                              if set(r.named) - set(present) else "")
+
+
+def top1(r: CaseResult, candidate: str) -> bool:
+    """`best` is the effect, alone (a pair is not a top-1 answer)."""
+    return r.best == candidate
 
 
 def truth_label(r: CaseResult) -> str:
@@ -192,6 +208,10 @@ def answer_label(r: CaseResult) -> str:
     return "ambiguous" if r.ambiguous_set else "none"
 
 
+def _same_class(truth: str, named: list[str]) -> bool:
+    return bool(named) and any(truth in cls and set(named) <= cls for cls in SAME_SIGNATURE)
+
+
 def summary(results: list[CaseResult]) -> dict[str, Any]:
     """The figures of the issue's "Done means", on this set."""
     by_kind: dict[str, list[CaseResult]] = defaultdict(list)
@@ -199,10 +219,10 @@ def summary(results: list[CaseResult]) -> dict[str, Any]:
         by_kind[r.kind].append(r)
     singles = [r for r in by_kind["single"] if not r.refused]
     scorable = [r for r in singles if candidates_for(r.truth[0], r.library)]
-    top1 = sum(judge(r) == "top1-correct" for r in scorable)
-    in_class = sum(judge(r) == "top1-correct" or any(
-        candidates_for(r.truth[0], r.library)[0] in cls and set(r.named) <= cls and r.named for cls in SAME_SIGNATURE)
-        for r in scorable)
+    firsts = [candidates_for(r.truth[0], r.library)[0] for r in scorable]
+    correct = sum(top1(r, c) for r, c in zip(scorable, firsts, strict=True))
+    in_class = sum(top1(r, c) or _same_class(c, [r.best] if r.best else [])
+                   for r, c in zip(scorable, firsts, strict=True))
     multi = [r for r in by_kind["multi"] if not r.refused]
     recall_hits = recall_total = every = 0
     for r in multi:
@@ -216,7 +236,8 @@ def summary(results: list[CaseResult]) -> dict[str, Any]:
     return {
         "cases": len(results), "refused": sum(bool(r.refused) for r in results),
         "kinds": {k: len(v) for k, v in sorted(by_kind.items())},
-        "single_top1": [top1, len(scorable)], "single_top1_same_signature_class": [in_class, len(scorable)],
+        "single_top1": [correct, len(scorable)],
+        "single_top1_same_signature_class": [in_class, len(scorable)],
         "single_without_candidate": len(singles) - len(scorable),
         "multi_effects_named": [recall_hits, recall_total],
         "multi_every_effect_named": [every, sum(1 for r in multi if any(candidates_for(e, r.library)
@@ -244,10 +265,11 @@ def format_report(results: list[CaseResult], figures: dict[str, Any]) -> str:
               f"  single-effect top-1: {_fraction(figures['single_top1'])}; within the same-signature class "
               f"{_fraction(figures['single_top1_same_signature_class'])}; "
               f"{figures['single_without_candidate']} single case(s) with no candidate in the library",
-              f"  multi-effect: effects named {_fraction(figures['multi_effects_named'])}, cases with every effect "
-              f"named {_fraction(figures['multi_every_effect_named'])}",
+              f"  multi-effect: effects named {_fraction(figures['multi_effects_named'])}, cases with every "
+              f"effect named {_fraction(figures['multi_every_effect_named'])}",
               f"  nulls with a false attribution: {_fraction(figures['null_false_attributions'])}",
-              f"  decoys left unexplained: {_fraction(figures['decoys_unexplained'])}", "", "confusion (truth x answer):"]
+              f"  decoys left unexplained: {_fraction(figures['decoys_unexplained'])}", "",
+              "confusion (truth x answer):"]
     matrix = Counter((truth_label(r), answer_label(r)) for r in results)
     rows = sorted({t for t, _ in matrix})
     cols = sorted({a for _, a in matrix})

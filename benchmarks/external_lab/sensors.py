@@ -1,11 +1,12 @@
-"""What the other lab's instruments add: the room's temperature, the force sensor's thermal drift and 1/f wander
-(the drift effect), its filter, lag, noise and sample rate, a push-only or bonded contact, a calibration error
-(a decoy), and a camera that tracks the tip at its own frame rate with exposure averaging and pixel noise.
+"""What the other lab's instruments add: the room's temperature, the force sensor's thermal drift and 1/f
+wander (the drift effect), its filter, lag, noise and sample rate, a push-only or bonded contact, a
+calibration error (a decoy), and a camera that tracks the tip at its own frame rate with exposure averaging
+and pixel noise.
 
 Drift form (in neither column of the project's table): the sensor's temperature follows the room (a drawn
 profile: a slow trend plus an air-conditioning cycle) and its own electronics warming up, both through a
-first-order thermal lag, times a temperature coefficient; plus pink (1/f) noise shaped in the frequency domain.
-The sensor is tared once per mounting, so the baseline is its change since the tare.
+first-order thermal lag, times a temperature coefficient; plus pink (1/f) noise shaped in the frequency
+domain. The sensor is tared once per mounting, so the baseline is its change since the tare.
 """
 
 from __future__ import annotations
@@ -66,8 +67,8 @@ def pink_noise(n: int, seed: int) -> np.ndarray:
 class ForceSensor:
     """noise_N per sample (white, before the filter's smoothing is accounted: the RMS is set after it),
     filter_s (first-order anti-alias / load-cell response), lag_s (timestamps late by this), every
-    `decimation`-th row carries a reading, `scale` (1 = calibrated; a decoy when off), push_only (the tip rests on
-    the button) or bonded (reads pull too), resolution_N (quantisation)."""
+    `decimation`-th row carries a reading, `scale` (1 = calibrated; a decoy when off), push_only (the tip
+    rests on the button) or bonded (reads pull too), resolution_N (quantisation)."""
 
     kind: str
     noise_N: float

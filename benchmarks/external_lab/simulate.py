@@ -1,10 +1,11 @@
-"""One case's specimens and sessions, and the time series of one specimen block (one test at one bias voltage):
-drive -> amplifier -> each plate's voltage -> the material effects -> the cantilever's free deflection -> either
-the contact force on the sensor (blocked) or the camera's view of the tip (free) -> the instruments.
+"""One case's specimens and sessions, and the time series of one specimen block (one test at one bias
+voltage): drive -> amplifier -> each plate's voltage -> the material effects -> the cantilever's free
+deflection -> either the contact force on the sensor (blocked) or the camera's view of the tip (free) -> the
+instruments.
 
-The session clock runs over the whole case (per layer count: each specimen mounted once, its tests at every bias
-in turn), so the drift, the amplifier's warming and a plate's depolarisation carry from block to block as they
-would on a bench.
+The session clock runs over the whole case (per layer count: each specimen mounted once, its tests at every
+bias in turn), so the drift, the amplifier's warming and a plate's depolarisation carry from block to block as
+they would on a bench.
 """
 
 from __future__ import annotations
@@ -74,7 +75,8 @@ def build_for(case: Case, layers: int, spec_index: int) -> physics.Build:
                 modulus_top_Pa=b.modulus_top_Pa * (1 + tol["modulus"]),
                 d31_bottom_m_per_V=b.d31_bottom_m_per_V * (1 + tol["d31"]),
                 d31_top_m_per_V=b.d31_top_m_per_V * (1 + tol["d31"]),
-                length_m=b.length_m * (1 + tol["length"]), cf_thickness_m=b.cf_thickness_m * (1 + tol["cf_layer"]),
+                length_m=b.length_m * (1 + tol["length"]),
+                cf_thickness_m=b.cf_thickness_m * (1 + tol["cf_layer"]),
                 cf_modulus_Pa=b.cf_modulus_Pa * (1 + tol["cf_modulus"]))
     b = apply_fabrication(case, b)
     s = case.scatter[case.layers.index(layers) * case.n_specimens + spec_index]
@@ -98,7 +100,8 @@ def apply_fabrication(case: Case, b: physics.Build) -> physics.Build:
         b = replace(b, edge_band_m=p["band_fraction"] * b.width_nom_m,
                     edge_band_modulus_factor=p["band_modulus_factor"])
     if p := _effect_params(case, "pzt_thickness"):
-        b = replace(b, pzt_bottom_m=b.pzt_bottom_m * p["bottom_factor"], pzt_top_m=b.pzt_top_m * p["top_factor"])
+        b = replace(b, pzt_bottom_m=b.pzt_bottom_m * p["bottom_factor"],
+                    pzt_top_m=b.pzt_top_m * p["top_factor"])
     if p := _effect_params(case, "pzt_modulus"):
         b = replace(b, modulus_bottom_Pa=b.modulus_bottom_Pa * p["bottom_factor"],
                     modulus_top_Pa=b.modulus_top_Pa * p["top_factor"])
@@ -124,9 +127,10 @@ def coefficients(build: physics.Build, modulus_scale: float = 1.0) -> physics.Co
 
 def timing_of(case: Case) -> DriveTiming:
     t = case.timing
-    return DriveTiming(dwell_low_s=t["dwell_low_s"], dwell_high_s=t["dwell_high_s"], ramp_s=tuple(t["ramp_s"]),
-                       cycles=t["cycles"], repetitions=t["repetitions"], pause_s=t["pause_s"], lead_s=t["lead_s"],
-                       tail_s=t["tail_s"], pre_roll_s=t["pre_roll_s"])
+    return DriveTiming(dwell_low_s=t["dwell_low_s"], dwell_high_s=t["dwell_high_s"],
+                       ramp_s=tuple(t["ramp_s"]), cycles=t["cycles"], repetitions=t["repetitions"],
+                       pause_s=t["pause_s"], lead_s=t["lead_s"], tail_s=t["tail_s"],
+                       pre_roll_s=t["pre_roll_s"])
 
 
 def creep_of(case: Case) -> fx.KohlrauschCreep | None:
@@ -168,7 +172,8 @@ def series_springs(case: Case, k_act: float) -> list[mechanics.Deflection]:
             springs.append(mechanics.SinhBaseSpring(p["k0_over_k_act"] * k_act, p["hardening_m"]).deflection)
         else:
             push = p["push_over_k_act"] * k_act
-            springs.append(mechanics.AsymmetricBaseSpring(push, push * p["pull_over_push"], p["blend_N"]).deflection)
+            spring = mechanics.AsymmetricBaseSpring(push, push * p["pull_over_push"], p["blend_N"])
+            springs.append(spring.deflection)
     if p := _effect_params(case, "sensor_compliance"):
         hertz = 0.1 / p["hertz_indent_at_100mN_m"] ** 1.5
         springs.append(mechanics.SensorContact(p["k_over_k_act"] * k_act, hertz).deflection)
@@ -179,8 +184,8 @@ def series_springs(case: Case, k_act: float) -> list[mechanics.Deflection]:
 
 def plate_response(case: Case, specimen: Specimen, t: np.ndarray, v_plate: np.ndarray, thickness_m: float
                    ) -> np.ndarray:
-    """A plate's effective voltage after the field law, hysteresis and creep (in that order: the gain belongs to
-    the material's reversible response, the loop and the slow relaxation act on what it produces)."""
+    """A plate's effective voltage after the field law, hysteresis and creep (in that order: the gain belongs
+    to the material's reversible response, the loop and the slow relaxation act on what it produces)."""
     e = v_plate
     if law := d31_law_of(case, specimen.layers):
         e = law.apply(e, thickness_m)
@@ -203,7 +208,8 @@ def simulate_block(case: Case, block: Block, drift: tuple[np.ndarray, np.ndarray
     notes: dict[str, float] = {}
     gain: np.ndarray | float = 1.0
     if p := _effect_params(case, "amplifier_droop"):
-        gain, droop_state = AmplifierDroop(p["max_droop"], p["tau_s"]).gain(t_session, block.bias_V, droop_state)
+        droop = AmplifierDroop(p["max_droop"], p["tau_s"])
+        gain, droop_state = droop.gain(t_session, block.bias_V, droop_state)
         notes["droop_max"] = float(1.0 - np.min(gain))
     v_drive = Amplifier(case.amplifier_tau_s).output(t, v_cmd, gain)
     v_bias = bias_waveform(t, block.bias_V)
@@ -211,7 +217,9 @@ def simulate_block(case: Case, block: Block, drift: tuple[np.ndarray, np.ndarray
     e_bottom = plate_response(case, sp, t, v_drive, b.pzt_bottom_m) * sp.polarisation_bottom
     e_top = plate_response(case, sp, t, v_bias - v_drive, b.pzt_top_m) * sp.polarisation_top
     c = coefficients(b)
-    a_bottom, a_top, compliance = c.free_bottom_m_per_V, c.free_top_m_per_V, c.compliance_m_per_N
+    a_bottom: np.ndarray | float = c.free_bottom_m_per_V
+    a_top: np.ndarray | float = c.free_top_m_per_V
+    compliance: np.ndarray | float = c.compliance_m_per_N
     if p := _effect_params(case, "thermal_modulus"):
         heating = fx.SelfHeatingModulus(p["per_K"], p["heat_K"], p["tau_s"])
         duty = float(np.mean(np.abs(np.diff(v_cmd)) > 0))
@@ -229,8 +237,8 @@ def simulate_block(case: Case, block: Block, drift: tuple[np.ndarray, np.ndarray
     voltage = seen_V[rec] + mon["noise_V"] * rng.standard_normal(int(rec.sum()))
     if block.test == "blocked":
         fs = case.force_sensor
-        force = mechanics.contact_force(free, compliance, sp.gap_m, series_springs(case, 1.0 / c.compliance_m_per_N),
-                                        push_only=fs["push_only"])
+        springs = series_springs(case, c.stiffness_N_per_m)
+        force = mechanics.contact_force(free, compliance, sp.gap_m, springs, push_only=fs["push_only"])
         baseline = np.zeros(t.size)
         if drift is not None:
             grid, base = drift
@@ -273,8 +281,8 @@ def jitter(case: Case, key: str, *salt: int) -> float:
 
 
 def schedule(case: Case) -> list[Block]:
-    """Every block in the order the lab ran them: per layer count, each specimen mounted once, its tests in the
-    case's order, each at every bias voltage (ascending)."""
+    """Every block in the order the lab ran them: per layer count, each specimen mounted once, its tests in
+    the case's order, each at every bias voltage (ascending)."""
     timing = timing_of(case)
     blocks: list[Block] = []
     t = case.session_gaps_s["session_start_s"]

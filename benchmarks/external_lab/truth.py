@@ -1,7 +1,7 @@
-"""What a hidden judge keeps beside each case: every effect's realised size in terms a reader can check against
-the literature (loop width in % of span, creep per decade, blocked-force and stroke ratios, d31 gain at the
-case's fields), computed noise-free from the generator's own physics, plus the per-block notes the simulation
-gathered (drift wander, amplifier droop, depolarisation, modulus drop)."""
+"""What a hidden judge keeps beside each case: every effect's realised size in terms a reader can check
+against the literature (loop width in % of span, creep per decade, blocked-force and stroke ratios, d31 gain
+at the case's fields), computed noise-free from the generator's own physics, plus the per-block notes the
+simulation gathered (drift wander, amplifier droop, depolarisation, modulus drop)."""
 
 from __future__ import annotations
 
@@ -49,13 +49,14 @@ def effect_observables(case: Case) -> None:
             t_um = sp.build.pzt_bottom_m * 1e6
             obs.update({f"d31_gain_at_{v:.0f}V": law.gain_at(v / t_um) for v in (v_lo, v_hi)})
         elif name in ("base_compliance", "sensor_compliance"):
-            c = sim.coefficients(sp.build)
-            k_act = c.stiffness_N_per_m
-            reach = np.array([v_lo, v_hi]) * (c.free_bottom_m_per_V + c.free_top_m_per_V) / 2.0
-            springs = sim.series_springs(case, k_act)
-            rigid = mechanics.contact_force(reach, c.compliance_m_per_N, 0.0, [], push_only=False)
-            soft = mechanics.contact_force(reach, c.compliance_m_per_N, 0.0, springs, push_only=False)
-            obs.update({f"blocked_force_ratio_at_{v:.0f}V": float(r) for v, r in zip((v_lo, v_hi), soft / rigid)})
+            coef = sim.coefficients(sp.build)
+            reach = np.array([v_lo, v_hi]) * (coef.free_bottom_m_per_V + coef.free_top_m_per_V) / 2.0
+            springs = sim.series_springs(case, coef.stiffness_N_per_m)
+            rigid = mechanics.contact_force(reach, coef.compliance_m_per_N, 0.0, [], push_only=False)
+            soft = mechanics.contact_force(reach, coef.compliance_m_per_N, 0.0, springs, push_only=False)
+            ratio = soft / rigid
+            obs.update({f"blocked_force_ratio_at_{v_lo:.0f}V": float(ratio[0]),
+                        f"blocked_force_ratio_at_{v_hi:.0f}V": float(ratio[1])})
         elif name == "sensor_scale":
             obs.update(scale=e["params"]["scale"])
         elif name in ("grounding", "width_loss", "pzt_thickness", "pzt_modulus", "length"):

@@ -1,8 +1,8 @@
-"""The external-lab generator (benchmarks/external_lab): independent of the project's code, deterministic under a
-seed, and right in the limits that can be derived without it. The closed form below is written here from the
-physics notes (section 1), not taken from the generator or from hamr_bench.model; the comparison with
-hamr_bench.model is a second, separate check that the two implementations agree where they must (at zero effect
-the other lab's actuator IS the project's nominal model, so a null case is a null)."""
+"""The external-lab generator (benchmarks/external_lab): independent of the project's code, deterministic
+under a seed, and right in the limits that can be derived without it. The closed form below is written here
+from the physics notes (section 1), not taken from the generator or from hamr_bench.model; the comparison with
+hamr_bench.model is a second, separate check that the two implementations agree where they must (at zero
+effect the other lab's actuator IS the project's nominal model, so a null case is a null)."""
 
 from __future__ import annotations
 
@@ -56,7 +56,8 @@ def _closed_form(layers: int) -> tuple[float, float]:
     lr, wr, d31, ep, ec = 0.0063, 1.5, 0.36e-9, 34e9, 340e9
     d = ep * tp / 3 * (1.5 * tc**2 + 3 * tc * tp + 2 * tp**2) + ec * tc**3 / 12
     gf = 8 * (1 - wr) ** 3 * (1 + 2 * lr) / (-6 * (wr - 1) * (-3 + 4 * lr * (wr - 1) + 2 * wr)
-                                             + 3 * (-2 + 2 * lr * (wr - 1) + wr) ** 2 * math.log((2 - wr) / wr))
+                                             + 3 * (-2 + 2 * lr * (wr - 1) + wr) ** 2
+                                             * math.log((2 - wr) / wr))
     gd = 1 + 2 * lr
     return 0.75 * d31 * ep * w * (tp + tc) * gf / l_act, 0.25 * d31 * ep * (tp + tc) * l_act**2 * gd / d
 
@@ -138,8 +139,8 @@ def test_kohlrausch_creep_matches_its_drawn_rate_per_decade():
 
 # ------------------------------------------------------------------------------ a null block, end to end
 def test_a_null_blocked_block_reads_the_specimens_blocked_force():
-    """No effect: the mean force over the high dwells is the specimen's own blocked force at the bias (minus the
-    contact gap's share), within the sensor noise; the drive level on the voltage column is V_bias."""
+    """No effect: the mean force over the high dwells is the specimen's own blocked force at the bias (minus
+    the contact gap's share), within the sensor noise; the drive level on the voltage column is V_bias."""
     case = next(c for c in (draw_case(s) for s in range(1, 400)) if c.kind == "null")
     blocks = [b for b in sim.schedule(case) if b.test == "blocked"]
     blk = blocks[-1]
@@ -151,7 +152,8 @@ def test_a_null_blocked_block_reads_the_specimens_blocked_force():
     c = sim.coefficients(blk.specimen.build)
     expected = (c.free_bottom_m_per_V * blk.bias_V - blk.specimen.gap_m) / c.compliance_m_per_N
     expected /= 1 + 1 / (c.compliance_m_per_N * 1.8e7)   # the Nano17's own spring in series
-    assert np.mean(f) == pytest.approx(expected, abs=4 * case.force_sensor["noise_N"] / math.sqrt(f.size) + 2e-4)
+    tolerance = 4 * case.force_sensor["noise_N"] / math.sqrt(f.size) + 2e-4
+    assert np.mean(f) == pytest.approx(expected, abs=tolerance)
     assert np.median(v[high]) == pytest.approx(blk.bias_V, abs=0.5)
 
 
@@ -168,15 +170,16 @@ def test_a_case_is_written_byte_identically_under_its_seed(tmp_path):
     for run in ("a", "b"):
         write_case(draw_case(seed), tmp_path / run)
         files = sorted((tmp_path / run).rglob("*.csv"))
-        digests.append({f.relative_to(tmp_path / run): hashlib.sha256(f.read_bytes()).hexdigest() for f in files})
+        digests.append({f.relative_to(tmp_path / run): hashlib.sha256(f.read_bytes()).hexdigest()
+                        for f in files})
     assert digests[0] == digests[1] and len(digests[0]) > 4
 
 
 # ------------------------------------------------------------------------------------------ the scorer
 def test_the_scorer_reads_names_pairs_and_refusals():
     out = {"best": "hysteresis+creep", "ranking": [
-        {"effect": "hysteresis+creep", "verdict": "attributed"}, {"effect": "width_loss", "verdict": "unexplained"},
-        {"effect": "creep", "verdict": "unexplained"}]}
+        {"effect": "hysteresis+creep", "verdict": "attributed"},
+        {"effect": "width_loss", "verdict": "unexplained"}, {"effect": "creep", "verdict": "unexplained"}]}
     r = score.CaseResult("c", "multi", ["hysteresis", "creep", "pzt_thickness"])
     score.read_answer(r, out)
     assert r.named == ["creep", "hysteresis"]
@@ -185,8 +188,19 @@ def test_the_scorer_reads_names_pairs_and_refusals():
     score.read_answer(null, {"best": None, "ranking": [{"effect": "creep", "verdict": "ambiguous",
                                                         "confusable_with": ["hysteresis"]}]})
     assert score.judge(null) == "ambiguous" and null.ambiguous_set == ["creep", "hysteresis"]
-    assert score._reason("Traceback...\n  x\nhamr-bench: error: f.csv:3: bad\n") == "hamr-bench: error: f.csv:3: bad"
+    line = "hamr-bench: error: f.csv:3: bad"
+    assert score._reason(f"Traceback...\n  x\n{line}\n") == line
+    # the issue-16 shape: a `named` list with verdicts, `best` the first attributed one
+    single = score.CaseResult("s", "single", ["grounding"])
+    score.read_answer(single, {"best": "grounding_lengthening", "named": [
+        {"effect": "grounding_lengthening", "verdict": "attributed"},
+        {"effect": "width_loss", "verdict": "within tolerance"},
+        {"effect": "creep", "verdict": "ambiguous", "confusable_with": ["timing_lag"]}],
+        "ranking": [{"effect": "grounding_lengthening"}, {"effect": "width_loss"}, {"effect": "creep"}]})
+    assert single.named == ["grounding_lengthening"] and single.ambiguous_set == ["creep", "timing_lag"]
+    assert score.judge(single) == "top1-correct"
     refused = score.CaseResult("r", "single", ["creep"], refused="gap: hamr-bench: error: no steps")
     assert score.judge(refused) == "refused"
-    figures = score.summary([r, null, refused])
+    figures = score.summary([r, null, single, refused])
     assert figures["refused"] == 1 and figures["multi_effects_named"] == [2, 2]
+    assert figures["single_top1"] == [1, 1] and figures["null_false_attributions"] == [0, 1]
