@@ -144,9 +144,9 @@ class RayleighAmplitudeD31:
 
     alpha: float
 
-    def apply(self, v_plate: np.ndarray, thickness_m: float) -> np.ndarray:
+    def gain(self, v_plate: np.ndarray, thickness_m: float) -> np.ndarray:
         amplitude_V_per_um = np.maximum.accumulate(np.abs(v_plate)) / (thickness_m * 1e6)
-        return v_plate * (1.0 + self.alpha * amplitude_V_per_um / FIELD_REF_V_PER_UM)
+        return 1.0 + self.alpha * amplitude_V_per_um / FIELD_REF_V_PER_UM
 
     def gain_at(self, field_V_per_um: float) -> float:
         return 1.0 + self.alpha * field_V_per_um / FIELD_REF_V_PER_UM
@@ -160,9 +160,9 @@ class CubicFieldD31:
     b: float
     field_ref_V_per_um: float
 
-    def apply(self, v_plate: np.ndarray, thickness_m: float) -> np.ndarray:
+    def gain(self, v_plate: np.ndarray, thickness_m: float) -> np.ndarray:
         e = v_plate / (thickness_m * 1e6) / self.field_ref_V_per_um
-        return v_plate * (1.0 + self.b * np.abs(e) ** 3)
+        return 1.0 + self.b * np.abs(e) ** 3
 
     def gain_at(self, field_V_per_um: float) -> float:
         return 1.0 + self.b * (field_V_per_um / self.field_ref_V_per_um) ** 3

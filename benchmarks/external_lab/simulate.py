@@ -184,13 +184,14 @@ def series_springs(case: Case, k_act: float) -> list[mechanics.Deflection]:
 
 def plate_response(case: Case, specimen: Specimen, t: np.ndarray, v_plate: np.ndarray, thickness_m: float
                    ) -> np.ndarray:
-    """A plate's effective voltage after the field law, hysteresis and creep (in that order: the gain belongs
-    to the material's reversible response, the loop and the slow relaxation act on what it produces)."""
+    """A plate's effective voltage: the hysteresis operator on its voltage (its kernels span the plate's
+    voltage range), times the field law's d31 gain at the plate's field, then creep acting on what that
+    produces."""
     e = v_plate
-    if law := d31_law_of(case, specimen.layers):
-        e = law.apply(e, thickness_m)
     if hyst := hysteresis_of(case, specimen):
         e = hyst.apply(e)
+    if law := d31_law_of(case, specimen.layers):
+        e = e * law.gain(v_plate, thickness_m)
     if creep := creep_of(case):
         e = creep.apply(t, e)
     return e
