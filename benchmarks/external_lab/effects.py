@@ -72,10 +72,7 @@ class KPHysteresis:
             if direction[i] == 0:
                 out[i + 1:j + 1] = state @ weight
                 continue
-            if direction[i] > 0:
-                states = np.maximum(state, up_ramp(piece))
-            else:
-                states = np.minimum(state, down_ramp(piece))
+            states = np.maximum(state, up_ramp(piece)) if direction[i] > 0 else np.minimum(state, down_ramp(piece))
             out[i + 1:j + 1] = states @ weight
             state = states[-1]
         return out
