@@ -81,7 +81,9 @@ def _produce_tick(sink: Any, tick: int, frames: list[np.ndarray] | None) -> None
         sink.write_image("/camera/image", tick * TICK_S, frames[tick % len(frames)], IMAGE_FORMAT[0])
 
 
-def _thread_cpu_s(native_id: int) -> float:
+def _thread_cpu_s(native_id: int | None) -> float:
+    if native_id is None:  # the thread has not started
+        return float("nan")
     try:
         fields = Path(f"/proc/self/task/{native_id}/stat").read_text().rsplit(")", 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

@@ -23,7 +23,7 @@ from pathlib import Path
 from analysis.replay import read_replay_source, replay_recording
 from hamr_bench.protocols.session import RunRequest, run_protocol
 
-CASES = {
+CASES: dict[str, list[str]] = {
     "blocked-force": [],
     "sag-sweep": [],
     "free-displacement": [],

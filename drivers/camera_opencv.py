@@ -58,6 +58,7 @@ class OpenCvCamera:
     ) -> None:
         self._name = name
         self._clock = clock
+        cap: CaptureLike
         if isinstance(source, (int, str)):
             cap = cv2.VideoCapture(source, api_preference)
             if not cap.isOpened():

@@ -29,7 +29,6 @@ COMMAND_EXCEPTIONS: frozenset[tuple[str, str]] = frozenset({
     ("hamr_bench/commands/replay.py", "analysis"),
     ("hamr_bench/commands/report.py", "analysis"),
     ("hamr_bench/commands/selfcheck.py", "analysis"),
-    ("hamr_bench/commands/sim.py", "sim_devices"),
 })
 
 
