@@ -15,17 +15,17 @@ from typing import TYPE_CHECKING
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from sim_devices.serial_link import LineEndpoint, get_endpoint, wait_until
+from sim_devices.serial_link import SerialEndpoint, get_endpoint, wait_until
 
 if TYPE_CHECKING:
     from typing_extensions import Buffer  # collections.abc.Buffer from Python 3.12
 
 
 class Serial(SerialBase):
-    """A pyserial port backed by a registered `LineEndpoint`."""
+    """A pyserial port backed by a registered `SerialEndpoint`."""
 
     def __init__(self, *args, **kwargs) -> None:
-        self._endpoint: LineEndpoint | None = None
+        self._endpoint: SerialEndpoint | None = None
         self._rx = bytearray()
         super().__init__(*args, **kwargs)
 
@@ -65,14 +65,14 @@ class Serial(SerialBase):
     def _update_break_state(self) -> None:
         pass
 
-    def _check(self) -> LineEndpoint:
+    def _check(self) -> SerialEndpoint:
         if not self.is_open or self._endpoint is None:
             raise PortNotOpenError()
         if not self._endpoint.is_connected():
             raise SerialException(f"{self.port}: device disconnected")
         return self._endpoint
 
-    def _pull(self, endpoint: LineEndpoint) -> None:
+    def _pull(self, endpoint: SerialEndpoint) -> None:
         self._rx += endpoint.output_until(endpoint.clock.now_s())
 
     @property
