@@ -41,13 +41,14 @@ from typing import Any
 import numpy as np
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording.contract import EventKind, Topic
 
 CHANNELS = {  # measured streams (commands are inputs: a replay copies them)
-    "force_N": ("/force", "force_N"),
-    "stage_position_m": ("/stage/position", "position_m"),
-    "bias_monitor_V": ("/amplifier/bias/monitor", "voltage_V"),
-    "drive_monitor_V": ("/amplifier/drive/monitor", "voltage_V"),
-    "displacement_m": ("/camera/displacement", "displacement_m"),
+    "force_N": (Topic.FORCE, "force_N"),
+    "stage_position_m": (Topic.STAGE_POSITION, "position_m"),
+    "bias_monitor_V": (Topic.BIAS_MONITOR, "voltage_V"),
+    "drive_monitor_V": (Topic.DRIVE_MONITOR, "voltage_V"),
+    "displacement_m": (Topic.CAMERA_DISPLACEMENT, "displacement_m"),
 }
 EXCEED_FACTOR = 3.0
 OFFSET_Z = 5.0
@@ -95,8 +96,8 @@ def load_side(path: Path | str) -> Side:
         steps_nonzero = steps_nonzero[steps_nonzero > 0]
         resolution[name] = float(steps_nonzero.min()) / math.sqrt(12) if steps_nonzero.size else 0.0
     events = reader.events()
-    step_events = [e for e in events if e.kind == "step"]
-    ends = [e.time_s for e in events if e.kind in ("run_end", "safe_state")]
+    step_events = [e for e in events if e.kind == EventKind.STEP]
+    ends = [e.time_s for e in events if e.kind in (EventKind.RUN_END, EventKind.SAFE_STATE)]
     all_last = [ti.last_time_s for ti in topics.values() if ti.last_time_s is not None]
     end_s = max(ends + all_last + [e.time_s for e in events]) + 1e-9 if (ends or all_last or events) else 0.0
     first = [ti.first_time_s for ti in topics.values() if ti.first_time_s is not None]

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording.contract import MetadataName
 from hamr_bench.recording.reader import RecordingReader, RecordingWarning
 
 # Metadata keys shown in the text summary, per record; anything else is in --json.
@@ -73,7 +74,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
         "crc": crc,
         "exit_status": reader.exit_status,
         "reason": reader.exit_reason,
-        "start_time_utc": metadata.get("recording", {}).get("start_time_utc"),
+        "start_time_utc": metadata.get(MetadataName.RECORDING, {}).get("start_time_utc"),
         "time_span_s": [min(first_times), max(last_times)] if first_times else None,
         "messages": sum(t["messages"] for t in topics),
         "topics": topics,
