@@ -436,11 +436,13 @@ def _sha256_of_file(path: Path) -> str:
 def replay_recording(source_path: Path | str, out: Path | str, *, params_path: Path | str | None = None,
                      effects: dict[str, float] | None = None, seed: int | None = None,
                      rig_path: Path | str | None = None, overwrite: bool = False, quiet: bool = True,
-                     record_traffic: bool = False, serve_traffic: bool = False) -> tuple[Any, ReplaySource]:
+                     record_traffic: bool = False, serve_traffic: bool = False, camera_storage: Any = None,
+                     live: Any = None) -> tuple[Any, ReplaySource]:
     """Re-execute `source_path` on the simulated bench into `out`. Seed and effects default to the source's
     (a simulated source) or to 0 / none; model parameters are the bench's nominal ones unless `params_path` names
     a fit's JSON. `serve_traffic` serves the serial devices from the source's recorded traffic instead of the
-    emulators (driver-change testing). Returns (RunResult, ReplaySource)."""
+    emulators (driver-change testing). `camera_storage` and `live` (a LiveView) as for a run
+    (hamr_bench.protocols.session.RunRequest). Returns (RunResult, ReplaySource)."""
     from hamr_bench.protocols.replay_plan import ReplayRequest, run_replay
 
     # The digest is computed on a thread while the source is read: both stream the whole file (hundreds of MB for a
@@ -470,5 +472,5 @@ def replay_recording(source_path: Path | str, out: Path | str, *, params_path: P
         fixture=source.fixture, seed=use_seed, effects=use_effects, replay_metadata=replay_md,
         model_overrides=overrides, rig_path=Path(rig_path) if rig_path else None, overwrite=overwrite,
         record_traffic=record_traffic, step_count=source.steps, quiet=quiet,
-        traffic_from=Path(source_path) if serve_traffic else None))
+        traffic_from=Path(source_path) if serve_traffic else None, camera_storage=camera_storage, live=live))
     return result, source

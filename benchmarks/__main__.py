@@ -13,7 +13,7 @@ A benchmark that fails is reported in `errors` (and its records carry met=null);
 `machine` gives the load average before and after; figures in wall time suffer from other load, CPU-time figures
 (given in `details`) much less.
 
-Benchmarks (names for --only): model, tracking, serial, acquisition, campaign, replay, fit, gap, scaleout.
+Benchmarks (names for --only): model, tracking, serial, acquisition, live, campaign, replay, fit, gap, scaleout.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-ORDER = ("model", "tracking", "serial", "acquisition", "campaign", "replay", "fit", "gap", "scaleout")
+ORDER = ("model", "tracking", "serial", "acquisition", "live", "campaign", "replay", "fit", "gap", "scaleout")
 
 
 def goal(on: str, op: str, target: float) -> dict[str, Any]:
@@ -192,6 +192,41 @@ def bench_acquisition(ctx: Context) -> list[dict]:
     ]
 
 
+def bench_live(ctx: Context) -> list[dict]:
+    from benchmarks import bench_live
+
+    r = bench_live.run(duration_s=10.0 if ctx.quick else 30.0, quick=ctx.quick)
+    live = r["live"]
+    load = {"load_average_before": r["load_average_before"], "load_average_after": r["load_average_after"]}
+    load_note = f"{live['duration_s']:.0f} s real time at full load: 10 kHz force, 1 kHz stage and voltages, " \
+                "640x480 at 100 fps; a websockets client in another process subscribed to every topic"
+    records = [
+        record("live.sample_latency_median", live["samples_median_ms"], "ms", live["samples_p95_ms"],
+               "95th percentile", None, "", goal("value", "<=", 100.0),
+               note=f"{load_note}; worst topic's median, from the sample's own time to its arrival",
+               topics=live["client_topics"], server_publish_age_median_ms=live["server_publish_age_median_ms"],
+               client_errors=live["client_errors"], **load),
+        record("live.frame_latency_median", live["frames_median_ms"], "ms", live["frames_p95_ms"],
+               "95th percentile", None, "", goal("value", "<=", 200.0), note=load_note, **load),
+        record("live.recorder_and_server_cpu_share", 100 * live["cpu_share_recorder_and_live"], "% of one core",
+               100 * live["cpu_share_recorder_alone"], "the recorder alone, same load, same run",
+               live["cpu_share_recorder_and_live"] / live["cpu_share_recorder_alone"], "with live / alone",
+               goal("value", "<", 30.0), note="process CPU minus the producer loop's own (null sink), per wall s",
+               published_to_server=live["published_to_server"], dropped_by_live_tap=live["dropped_by_live_tap"],
+               **load),
+        record("live.dropped_samples_in_file", live["dropped_in_file"], "samples", None, "", None, "",
+               goal("value", "==", 0), note=f"{live['samples_written']} of {live['samples_expected']} written",
+               **load),
+    ]
+    for protocol, row in r["bytes_per_recorded_s"].items():
+        records.append(record(
+            f"bytes_per_recorded_s.{protocol}", row["roi_bytes_per_s"], "B/s", row["full_bytes_per_s"],
+            "every frame kept raw (--camera-storage full, format 1's storage)", row["ratio"], "roi / full",
+            note=f"simulated bench, {row['recorded_s']:.0f} s recorded" + (" (shortened)" if ctx.quick else ""),
+            **load))
+    return records
+
+
 def bench_campaign(ctx: Context) -> list[dict]:
     ctx.ensure_campaign()
     c = ctx.campaign_result
@@ -300,6 +335,7 @@ def bench_scaleout(ctx: Context) -> list[dict]:
 
 BENCHMARKS: dict[str, Callable[[Context], list[dict]]] = {
     "model": bench_model, "tracking": bench_tracking, "serial": bench_serial, "acquisition": bench_acquisition,
+    "live": bench_live,
     "campaign": bench_campaign, "replay": bench_replay, "fit": bench_fit, "gap": bench_gap,
     "scaleout": bench_scaleout,
 }

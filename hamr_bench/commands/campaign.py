@@ -26,13 +26,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hamr_bench.commands.run import recording_options
     from hamr_bench.config import parse_effects
+    from hamr_bench.live.session import open_live_view
     from hamr_bench.protocols.campaign import campaign_runs, run_campaign
 
+    live, camera_storage = recording_options(args)
     args.out.mkdir(parents=True, exist_ok=True)
-    runs = campaign_runs(args.out, parse_effects(args.effects), args.seed, args.force, args.set_options)
+    runs = campaign_runs(args.out, parse_effects(args.effects), args.seed, args.force, args.set_options,
+                         camera_storage=camera_storage)
     start = time.perf_counter()
-    results = run_campaign(runs, jobs=args.jobs, progress=not args.quiet)
+    with open_live_view(live) as view:
+        if view is not None and args.jobs not in (None, 1):
+            print("hamr-bench: campaign --live runs one run at a time (the view follows one run)", file=sys.stderr)
+        results = run_campaign(runs, jobs=args.jobs, progress=not args.quiet, live=view)
     wall_s = time.perf_counter() - start
     failed = [r for r in results if r[1] != "success"]
     for name, status, reason in failed:

@@ -8,6 +8,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from hamr_bench.commands.run import add_recording_options, recording_options
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -29,18 +31,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "devices said")
     parser.add_argument("--force", action="store_true", help="overwrite TWIN.mcap if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_recording_options(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from analysis.replay import replay_recording
     from hamr_bench.config import parse_effects
+    from hamr_bench.live.session import open_live_view
 
     effects = parse_effects(args.effects) if args.effects is not None else None
-    result, source = replay_recording(
-        args.recording, args.out, params_path=args.params, effects=effects, seed=args.seed, rig_path=args.rig,
-        overwrite=args.force, quiet=args.quiet, record_traffic=args.record_traffic,
-        serve_traffic=args.serve_traffic)
+    live, camera_storage = recording_options(args)
+    with open_live_view(live) as view:
+        result, source = replay_recording(
+            args.recording, args.out, params_path=args.params, effects=effects, seed=args.seed, rig_path=args.rig,
+            overwrite=args.force, quiet=args.quiet, record_traffic=args.record_traffic,
+            serve_traffic=args.serve_traffic, camera_storage=camera_storage, live=view)
     if result.ok:
         if not args.quiet:
             print(f"{args.out}: replay of {args.recording} ({source.protocol}, {source.steps} steps, "

@@ -17,6 +17,28 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed of the simulated bench (default 0)")
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_recording_options(parser)
+
+
+def add_recording_options(parser: argparse.ArgumentParser) -> None:
+    """Options shared by everything that records a run (`run`, `campaign`, `replay`): live view, camera storage."""
+    parser.add_argument("--live", metavar="[HOST:]PORT", default=None,
+                        help="serve every stream live over Foxglove's WebSocket protocol while recording "
+                        "(localhost unless HOST is given; PORT 0 picks a free one); prints the URL and the control "
+                        "token (docs/live-view.md)")
+    parser.add_argument("--camera-storage", default="roi", metavar="MODE",
+                        help="how camera frames are kept: roi (default: a 64 px region around the marker every "
+                        "frame + a full frame a second; roi:SIZE_PX[:INTERVAL_S]), full (every frame, raw), png "
+                        "(every frame, lossless compressed), none (docs/log-format.md)")
+
+
+def recording_options(args: argparse.Namespace):  # -> tuple[LiveOptions | None, CameraStorage]
+    """The parsed `--live` and `--camera-storage` (a bad value is one ConfigError line)."""
+    from hamr_bench.live.options import LiveOptions
+    from hamr_bench.recording.camera_storage import CameraStorage
+
+    live = LiveOptions.parse(args.live) if args.live is not None else None
+    return live, CameraStorage.parse(args.camera_storage)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,13 +71,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hamr_bench.config import parse_effects
+    from hamr_bench.live.session import open_live_view
     from hamr_bench.protocols.session import RunRequest, run_protocol
 
-    result = run_protocol(RunRequest(
-        protocol=args.protocol, out=args.out, rig_path=None if args.sim else args.rig, design=args.design,
-        layers=args.layers, effects=parse_effects(args.effects), seed=args.seed,
-        protocol_file=args.protocol_file, set_options=args.set_options, overwrite=args.force,
-        quiet=args.quiet, record_traffic=args.record_traffic, faults=args.faults))
+    live, camera_storage = recording_options(args)
+    with open_live_view(live) as view:
+        result = run_protocol(RunRequest(
+            protocol=args.protocol, out=args.out, rig_path=None if args.sim else args.rig, design=args.design,
+            layers=args.layers, effects=parse_effects(args.effects), seed=args.seed,
+            protocol_file=args.protocol_file, set_options=args.set_options, overwrite=args.force,
+            quiet=args.quiet, record_traffic=args.record_traffic, faults=args.faults,
+            camera_storage=camera_storage, live=view))
     if result.ok:
         if not args.quiet:
             print(f"{args.out}: {args.protocol} completed, {result.steps_done} steps")

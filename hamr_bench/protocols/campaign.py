@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from hamr_bench.errors import ConfigError
 from hamr_bench.protocols.session import RunRequest, run_protocol
@@ -25,7 +26,7 @@ class CampaignRun:
 def campaign_runs(
     out_dir: Path, effects: dict[str, float], seed: int, overwrite: bool, set_options: list[str] | None = None,
     designs: tuple[int, ...] = DESIGNS, layers: tuple[int, ...] = LAYERS,
-    protocols: tuple[str, ...] = ("actuator",) + LEG_PROTOCOLS,
+    protocols: tuple[str, ...] = ("actuator",) + LEG_PROTOCOLS, camera_storage: Any = None,
 ) -> list[CampaignRun]:
     runs = []
     index = 0
@@ -35,7 +36,7 @@ def campaign_runs(
                 name = f"actuator-{n}layer"
                 runs.append(CampaignRun(name, RunRequest(
                     protocol="actuator", out=out_dir / f"{name}.mcap", layers=n, design=4, effects=effects,
-                    seed=seed * 1000 + index, overwrite=overwrite,
+                    seed=seed * 1000 + index, overwrite=overwrite, camera_storage=camera_storage,
                     set_options=options_for(protocol, list(set_options or [])))))
                 index += 1
             continue
@@ -43,7 +44,7 @@ def campaign_runs(
             name = f"design{design}-{protocol}"
             runs.append(CampaignRun(name, RunRequest(
                 protocol=protocol, out=out_dir / f"{name}.mcap", design=design, layers=2, effects=effects,
-                seed=seed * 1000 + index, overwrite=overwrite,
+                seed=seed * 1000 + index, overwrite=overwrite, camera_storage=camera_storage,
                 set_options=options_for(protocol, list(set_options or [])))))
             index += 1
     if not overwrite:
@@ -74,8 +75,14 @@ def _run_one(run: CampaignRun) -> tuple[str, str, str]:
     return run.name, result.exit_status, result.reason
 
 
-def run_campaign(runs: list[CampaignRun], jobs: int | None = None, progress: bool = True) -> list[tuple[str, str, str]]:
-    """Run every request; returns (name, exit_status, reason) per run, in order."""
+def run_campaign(runs: list[CampaignRun], jobs: int | None = None, progress: bool = True,
+                 live: Any = None) -> list[tuple[str, str, str]]:
+    """Run every request; returns (name, exit_status, reason) per run, in order. With a live view (`live`, a
+    hamr_bench.live.session.LiveView) the runs go one at a time in this process, each served while it runs, and an
+    abort accepted from the view ends the run in progress and starts no other."""
+    if live is not None:
+        runs = [CampaignRun(r.name, replace(r.request, live=live)) for r in runs]
+        jobs = 1
     jobs = jobs or min(len(runs), os.cpu_count() or 1)
     bar = None
     if progress:
@@ -86,6 +93,9 @@ def run_campaign(runs: list[CampaignRun], jobs: int | None = None, progress: boo
     results: list[tuple[str, str, str]] = []
     if jobs <= 1:
         for run in runs:
+            if live is not None and live.abort_requested is not None:
+                results.append((run.name, "aborted", f"not started: abort requested ({live.abort_requested})"))
+                continue
             results.append(_run_one(run))
             if bar:
                 bar.update()

@@ -177,6 +177,8 @@ class ReplayRequest:
     # emulators and run the source's protocol again: the drivers then talk to what the devices said in that run
     # (driver-change testing); the first write that differs from the recording fails the run, naming it.
     traffic_from: Path | None = None
+    camera_storage: Any = None  # a hamr_bench.recording.camera_storage.CameraStorage; None: the default (roi)
+    live: Any = None  # a hamr_bench.live.session.LiveView that serves the twin while it is recorded
 
 
 def _plan(items: Iterable[Any]) -> Plan:
@@ -196,7 +198,7 @@ def run_replay(req: ReplayRequest) -> RunResult:
     rig_path = req.rig_path or sim_rig_path()
     served: list[tuple[str, Any]] = []
     port_overrides = _traffic_ports(req.traffic_from, served) if req.traffic_from else None
-    recorder = Recorder(Path(req.out), overwrite=req.overwrite)
+    recorder = Recorder(Path(req.out), overwrite=req.overwrite, camera=req.camera_storage)
     try:
         rig = load_rig(rig_path, design=req.design, layers=req.layers, effects=req.effects, seed=req.seed,
                        fixture=req.fixture, record_traffic=recorder.write_bytes if req.record_traffic else None,
@@ -233,12 +235,19 @@ def run_replay(req: ReplayRequest) -> RunResult:
 
             protocol = get_protocol(req.protocol)
             params = params_from_recording(req.protocol, req.protocol_params_json)
-            result = Runner(rig, recorder, progress).run(protocol, params)
+            runner = Runner(rig, recorder, progress)
+            if req.live is not None:
+                req.live.follow(recorder, runner.request_abort)
+            result = runner.run(protocol, params)
         else:
             runner = Runner(rig, recorder, progress)
             ReplayCommands(runner).register()
+            if req.live is not None:
+                req.live.follow(recorder, runner.request_abort)
             result = runner.run_plan(_plan(req.items), f"replay of {req.protocol}")
     finally:
+        if req.live is not None:
+            req.live.unfollow()
         rig.close()
         for url, _endpoint in served:
             backends.traffic_server().close_served(url)

@@ -491,10 +491,12 @@ class Runner:
     def _grab_and_track(self, y0_px: float | None) -> float | None:
         assert self.rig.camera is not None  # only called while tracking with a camera
         frame = self.rig.camera.grab()
-        self.rec.write_image(Topic.CAMERA_IMAGE, frame.time_s, frame.image)
         if self.rig.track_px is None:
+            self.rec.write_image(Topic.CAMERA_IMAGE, frame.time_s, frame.image)
             return y0_px
         x_px, y_px = self.rig.track_px(frame.image)
+        # the recorder keeps the frame as its camera storage says, around the marker just tracked
+        self.rec.write_image(Topic.CAMERA_IMAGE, frame.time_s, frame.image, marker_px=(x_px, y_px))
         if y0_px is None:
             y0_px = y_px
         displacement_m = (y_px - y0_px) * self.rig.metres_per_pixel * self.rig.displacement_sign

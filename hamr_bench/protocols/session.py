@@ -37,6 +37,8 @@ class RunRequest:
     faults: list[str] = field(default_factory=list)
     extra_metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     params: Any = None  # already-built parameters (replay); overrides protocol_file/set_options
+    camera_storage: Any = None  # a hamr_bench.recording.camera_storage.CameraStorage; None: the default (roi)
+    live: Any = None  # a hamr_bench.live.session.LiveView that serves this run while it is recorded
 
 
 class TqdmProgress:
@@ -84,7 +86,7 @@ def run_protocol(req: RunRequest) -> RunResult:
     params = req.params if req.params is not None else load_params(
         protocol.Params(), req.protocol_file, req.set_options)
     rig_path = req.rig_path or sim_rig_path()
-    recorder = Recorder(Path(req.out), overwrite=req.overwrite)
+    recorder = Recorder(Path(req.out), overwrite=req.overwrite, camera=req.camera_storage)
     try:
         traffic = recorder.write_bytes if req.record_traffic else None
         rig = load_rig(rig_path, design=req.design, layers=req.layers, effects=req.effects, seed=req.seed,
@@ -95,8 +97,13 @@ def run_protocol(req: RunRequest) -> RunResult:
     try:
         _write_metadata(recorder, req, protocol, params, rig)
         progress = None if req.quiet else TqdmProgress(protocol.step_count(params), protocol.NAME)
-        return Runner(rig, recorder, progress).run(protocol, params)
+        runner = Runner(rig, recorder, progress)
+        if req.live is not None:
+            req.live.follow(recorder, runner.request_abort)
+        return runner.run(protocol, params)
     finally:
+        if req.live is not None:
+            req.live.unfollow()
         rig.close()
 
 

@@ -28,7 +28,12 @@ class Topic(StrEnum):
     DRIVE_MONITOR = "/amplifier/drive/monitor"
     CAMERA_DISPLACEMENT = "/camera/displacement"
     CAMERA_IMAGE = "/camera/image"
+    CAMERA_ROI = "/camera/roi"  # format 2: the region around the marker, every frame
+    CAMERA_ROI_ORIGIN = "/camera/roi/origin"  # format 2: that region's top-left pixel in the full frame
+    CAMERA_ANNOTATIONS = "/camera/annotations"  # format 2: the tracked marker drawn on /camera/image
     EVENTS = "/events"
+    LOG = "/log"  # format 2: every event as a foxglove.Log (Foxglove's Log panel)
+    STEP = "/step"  # format 2: each step's condition as typed fields (plottable by message path)
 
 
 TRAFFIC_PREFIX = "/traffic/"

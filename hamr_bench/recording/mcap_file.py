@@ -3,15 +3,16 @@
 Why not `mcap.writer.Writer`: it builds every record field by field through a stream object (about ten Python calls
 a message), which made the writer thread ~28 % of a simulated run's CPU. Here a message record is one
 `struct.pack`, the message index of a chunk is one `numpy` array turned to bytes, and each chunk chooses its own
-compression (camera frames are stored, scalars compressed) through a documented argument instead of a private
-attribute of another library's class. The recorder and `recover` write with it; the tests read what it writes with
-the `mcap` package, an independent implementation, as well as with `scan.py`.
+compression when it closes (a chunk that is mostly camera-frame bytes the caller marked `stored` is written
+uncompressed, any other is compressed) instead of through a private attribute of another library's class. The
+recorder and `recover` write with it; the tests read what it writes with the `mcap` package, an independent
+implementation, as well as with `scan.py`.
 
 Layout (MCAP v0, https://mcap.dev/spec): magic, Header, then the data section: Schema and Channel records as they
 are registered (outside chunks, so a truncated file still describes its channels), Chunks each followed by one
-MessageIndex per channel (one chunk is open per compression, so chunks of frames and of scalars interleave and may
-overlap in time; within a channel whose messages all use one compression, as the recorder's do, file order is
-time order), Metadata records between chunks; DataEnd with the
+MessageIndex per channel (one chunk is open at a time, so messages reach the file in the order they are added: a
+caller that adds them in log-time order, as the recorder does, gets a file whose log times never decrease in file
+order), Metadata records between chunks; DataEnd with the
 CRC of the data section; the summary section: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes,
 SummaryOffsets; Footer with the summary CRC; magic. All CRCs are written (chunk, data section, summary).
 """
@@ -65,16 +66,16 @@ def _compress(data: bytes, compression: str) -> bytes:
 class _Chunk:
     """The chunk in progress: its records, and per channel the (log time, offset) of each message."""
 
-    __slots__ = ("parts", "size", "messages", "start_ns", "end_ns", "index", "compression")
+    __slots__ = ("parts", "size", "messages", "start_ns", "end_ns", "index", "stored_bytes")
 
-    def __init__(self, compression: str) -> None:
+    def __init__(self) -> None:
         self.parts: list[bytes] = []
         self.size = 0
         self.messages = 0
         self.start_ns = 0
         self.end_ns = 0
         self.index: dict[int, list[int]] = {}  # channel id -> [log time, offset, log time, offset, ...]
-        self.compression = compression
+        self.stored_bytes = 0  # bytes of messages that would rather be stored than compressed (camera frames)
 
 
 class McapFileWriter:
@@ -88,7 +89,7 @@ class McapFileWriter:
         self.compression = compression
         self._pos = 0
         self._data_crc = 0
-        self._open: dict[str, _Chunk] = {}  # the chunk in progress per compression, in the order they opened
+        self._chunk: _Chunk | None = None  # the chunk in progress
         self._schemas: list[bytes] = []  # their records, for the summary
         self._channels: list[bytes] = []
         self._chunk_indexes: list[bytes] = []
@@ -109,10 +110,8 @@ class McapFileWriter:
         self._write(_record(OP_HEADER, _string(profile) + _string(library)))
 
     # ------------------------------------------------------------------ registration
-    # Schema and Channel records go straight into the data section, outside any chunk: with a chunk open per
-    # compression, a definition inside one chunk could reach the file after a message of its channel in another.
-    # Written at once, a definition precedes every message of its channel, so a truncated file still describes
-    # its channels.
+    # Schema and Channel records go straight into the data section, outside any chunk: written at once, a definition
+    # precedes every message of its channel, so a truncated file still describes its channels.
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         schema_id = len(self._schemas) + 1
         record = _record(OP_SCHEMA, struct.pack("<H", schema_id) + _string(name) + _string(encoding)
@@ -133,16 +132,13 @@ class McapFileWriter:
 
     # ------------------------------------------------------------------ messages
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int | None = None,
-                    sequence: int = 0, compression: str | None = None) -> None:
-        """One message into the open chunk of its compression (default: the file's). One chunk is open per
-        compression, so camera frames fill stored chunks of their own while scalars fill compressed ones: a frame
-        no longer cuts the scalars' chunk short (with one chunk at a time, every frame of a camera run closed two
-        chunks, each with its index records). Give one channel's messages one compression: split over two, they
-        reach the file in the order their chunks close, not in the order they came."""
-        wanted = self.compression if compression is None else compression
-        chunk = self._open.get(wanted)
+                    sequence: int = 0, stored: bool = False) -> None:
+        """One message into the open chunk. `stored=True` marks bytes that compress badly for their cost (camera
+        frames: sensor noise): a chunk at least half made of them is written uncompressed, any other with the
+        file's compression. One chunk is open at a time, so file order is the order of the calls."""
+        chunk = self._chunk
         if chunk is None:
-            chunk = self._open[wanted] = _Chunk(wanted)
+            chunk = self._chunk = _Chunk()
         head = _MESSAGE_HEAD.pack(OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence, log_time,
                                   log_time if publish_time is None else publish_time)
         entries = chunk.index.get(channel_id)
@@ -153,6 +149,8 @@ class McapFileWriter:
         chunk.parts.append(head)
         chunk.parts.append(data)
         chunk.size += len(head) + len(data)
+        if stored:
+            chunk.stored_bytes += len(data)
         if chunk.messages:
             if log_time < chunk.start_ns:
                 chunk.start_ns = log_time
@@ -163,19 +161,19 @@ class McapFileWriter:
         chunk.messages += 1
         self._channel_counts[channel_id] += 1
         if chunk.size > self._chunk_size:
-            self._close(chunk)
+            self.close_chunk()
 
     def close_chunk(self) -> None:
-        """Write every open chunk (oldest first) and its message indexes."""
-        for chunk in list(self._open.values()):
-            self._close(chunk)
-
-    def _close(self, chunk: _Chunk) -> None:
-        del self._open[chunk.compression]
+        """Write the open chunk (if any) and its message indexes."""
+        chunk = self._chunk
+        if chunk is None:
+            return
+        self._chunk = None
+        compression = "" if 2 * chunk.stored_bytes >= chunk.size else self.compression
         data = b"".join(chunk.parts)
-        stored = _compress(data, chunk.compression)
+        stored = _compress(data, compression)
         body = (struct.pack("<QQQI", chunk.start_ns, chunk.end_ns, len(data), zlib.crc32(data))
-                + _string(chunk.compression) + struct.pack("<Q", len(stored)))
+                + _string(compression) + struct.pack("<Q", len(stored)))
         chunk_start = self._pos
         self._write(_RECORD_HEAD.pack(OP_CHUNK, len(body) + len(stored)) + body)
         self._write(stored)
@@ -190,7 +188,7 @@ class McapFileWriter:
         self._chunk_spans.append((chunk.start_ns, chunk.end_ns))
         self._chunk_indexes.append(_record(OP_CHUNK_INDEX, struct.pack(
             "<QQQQI", chunk.start_ns, chunk.end_ns, chunk_start, chunk_length, len(offsets_map)) + offsets_map
-            + struct.pack("<Q", self._pos - index_start) + _string(chunk.compression)
+            + struct.pack("<Q", self._pos - index_start) + _string(compression)
             + struct.pack("<QQ", len(stored), len(data))))
 
     def flush(self) -> None:

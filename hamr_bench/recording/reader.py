@@ -79,7 +79,9 @@ class Event:
 @dataclass(frozen=True)
 class Image:
     """One camera frame: `format` is "raw" (a `foxglove.RawImage`: `width`, `height`, `encoding`, `step` say how
-    to read `data`) or the `foxglove.CompressedImage` format ("png", "jpeg")."""
+    to read `data`) or the `foxglove.CompressedImage` format ("png", "jpeg"). `origin_px` is where the image's
+    top-left pixel sits in the full frame: (0, 0) for a full frame, the region's corner for `/camera/roi`
+    (from `/camera/roi/origin`; None if that sample is missing)."""
 
     time_s: float
     format: str
@@ -89,6 +91,7 @@ class Image:
     height: int = 0
     encoding: str = ""
     step: int = 0
+    origin_px: tuple[int, int] | None = (0, 0)
 
     def pixels(self) -> np.ndarray:
         from hamr_bench.recording.images import decode_image, decode_raw_image
@@ -359,17 +362,31 @@ class RecordingReader:
         stream = self._streams.get(channel.id)
         if stream is None:
             return
+        origins = self._region_origins(topic)
         for offset in stream.chunk_offsets:
             for record in read_chunk_messages(self.path, offset, self.validate_crcs):
                 if record.channel_id != channel.id:
                     continue
                 msg = self._parse(cls, record.data, topic)
                 stamp_ns = msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos
+                origin = (0, 0) if origins is None else origins.get(record.log_time)
                 if raw:
                     yield Image(self._to_time_s(stamp_ns), "raw", msg.frame_id, bytes(msg.data), msg.width,
-                                msg.height, msg.encoding, msg.step)
+                                msg.height, msg.encoding, msg.step, origin)
                 else:
-                    yield Image(self._to_time_s(stamp_ns), msg.format, msg.frame_id, bytes(msg.data))
+                    yield Image(self._to_time_s(stamp_ns), msg.format, msg.frame_id, bytes(msg.data),
+                                origin_px=origin)
+
+    def _region_origins(self, topic: str) -> dict[int, tuple[int, int]] | None:
+        """log time -> (x0, y0) of a region-of-interest topic's frames (its `<topic>/origin` stream, written at
+        the frame's own time), or None for a topic of full frames."""
+        origin_topic = f"{topic}/origin"
+        if origin_topic not in self._by_topic:
+            return None
+        corners = self.scalars(origin_topic)
+        log_ns = self._stream(origin_topic).log_times()
+        return {int(t): (int(x), int(y)) for t, x, y in zip(log_ns, corners["x0_px"], corners["y0_px"],
+                                                                     strict=True)}
 
     # ------------------------------------------------------------------ helpers
 

@@ -61,7 +61,8 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
         raise RecordingError(f"cannot create {dst}: {exc.strerror or exc}") from None
 
     # The recorder's own writer, as the recorder writes: every schema and channel kept (written when registered,
-    # even one whose messages were all lost), frames in stored chunks, all CRCs.
+    # even one whose messages were all lost), frames marked for stored chunks, all CRCs; messages in
+    # the source's file order (a format-2 source is in log-time order, so its copy is too).
     writer = McapFileWriter(out, chunk_size=256 * 1024, compression="lz4")
     writer.start(profile="", library=f"hamr-bench {__version__} (recover)")
     stored_channels: set[int] = set()  # image channels: their frames go in stored chunks
@@ -88,7 +89,7 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                 orphans += 1
                 return
             writer.add_message(new_id, record.log_time, record.data, record.publish_time, record.sequence,
-                               compression="" if new_id in stored_channels else None)
+                               stored=new_id in stored_channels)
             topic = topics[new_id]
             counts[topic] = counts.get(topic, 0) + 1
             last_log = record.log_time if last_log is None else max(last_log, record.log_time)

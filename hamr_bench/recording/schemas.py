@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 import struct
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import Any, Callable
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
@@ -28,8 +28,13 @@ RAW_IMAGE_SCHEMA = "foxglove.RawImage"
 IMAGE_SCHEMAS = (RAW_IMAGE_SCHEMA, IMAGE_SCHEMA)
 EVENT_SCHEMA = f"{PACKAGE}.Event"
 TRAFFIC_SCHEMA = f"{PACKAGE}.SerialTraffic"
+LOG_SCHEMA = "foxglove.Log"
+ANNOTATIONS_SCHEMA = "foxglove.ImageAnnotations"
+STEP_SCHEMA = f"{PACKAGE}.StepCondition"
 EVENTS_TOPIC = "/events"
 TRAFFIC_PREFIX = "/traffic/"
+# Topics the recorder writes itself, never as plain scalars (format 2 adds the last five).
+RESERVED_TOPICS = ("/events", "/camera/image", "/log", "/step", "/camera/roi", "/camera/annotations")
 
 _FDP = descriptor_pb2.FieldDescriptorProto
 # Only field numbers 1..15 have a one-byte tag; the fixed-layout fast path relies on that.
@@ -100,6 +105,7 @@ STAGE_POSITION = ScalarSchema(f"{PACKAGE}.StagePosition", ("position_m",))
 STAGE_COMMAND = ScalarSchema(f"{PACKAGE}.StageCommand", ("target_m",))
 VOLTAGE = ScalarSchema(f"{PACKAGE}.Voltage", ("voltage_V",))
 CAMERA_DISPLACEMENT = ScalarSchema(f"{PACKAGE}.CameraDisplacement", ("displacement_m", "x_px", "y_px"))
+IMAGE_REGION = ScalarSchema(f"{PACKAGE}.ImageRegion", ("x0_px", "y0_px"))
 
 KNOWN_SCALAR_TOPICS: dict[str, ScalarSchema] = {
     "/force": FORCE,
@@ -110,7 +116,23 @@ KNOWN_SCALAR_TOPICS: dict[str, ScalarSchema] = {
     "/amplifier/bias/monitor": VOLTAGE,
     "/amplifier/drive/monitor": VOLTAGE,
     "/camera/displacement": CAMERA_DISPLACEMENT,
+    "/camera/roi/origin": IMAGE_REGION,
 }
+
+# Unit suffixes of field names (docs/log-format.md, "Units"): a field `name_<suffix>` is in that unit.
+UNIT_SUFFIXES = {"s": "s", "m": "m", "N": "N", "V": "V", "px": "px", "Hz": "Hz", "A": "A", "rad": "rad",
+                 "Pa": "Pa", "K": "K", "W": "W", "J": "J", "kg": "kg", "ns": "ns"}
+
+
+def unit_of(field_name: str) -> str | None:
+    """The unit a field name's suffix names (`force_N` -> N), or None when it names none (`step`)."""
+    _, sep, suffix = field_name.rpartition("_")
+    return UNIT_SUFFIXES.get(suffix) if sep else None
+
+
+def units_metadata(field_names: tuple[str, ...] | list[str]) -> dict[str, str]:
+    """Channel metadata giving each field's unit: {"unit.force_N": "N", ...} (fields without a unit left out)."""
+    return {f"unit.{name}": unit for name in field_names if (unit := unit_of(name)) is not None}
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOPIC = re.compile(r"^/[A-Za-z0-9_]+(/[A-Za-z0-9_]+)*$")
@@ -134,8 +156,8 @@ def scalar_schema_for(topic: str, field_names: tuple[str, ...]) -> ScalarSchema:
                 f"topic {topic} takes fields {', '.join(known.fields)}; got {', '.join(field_names) or 'none'}"
             )
         return known
-    if topic == EVENTS_TOPIC or topic.startswith(TRAFFIC_PREFIX) or topic.startswith("/camera/image"):
-        raise RecordingError(f"topic {topic} is reserved for events, traffic or images, not scalars")
+    if topic in RESERVED_TOPICS or topic.startswith(TRAFFIC_PREFIX) or topic.startswith("/camera/image"):
+        raise RecordingError(f"topic {topic} is reserved for events, logs, steps, traffic or images, not scalars")
     if not field_names:
         raise RecordingError(f"topic {topic}: a scalar sample needs at least one field (e.g. force_N=0.1)")
     if len(field_names) + 1 > MAX_SCALAR_FIELDS:
@@ -169,6 +191,44 @@ TRAFFIC_FIELDS = [
     ("direction", _FDP.TYPE_STRING),
     ("data", _FDP.TYPE_BYTES),
 ]
+
+
+# A step's condition as typed fields, so Foxglove plots e.g. `/step.voltage_V` (numbers absent from a condition are
+# NaN; `design` and `layers` 0 when the condition names none; strings empty).
+STEP_FIELDS = [
+    ("time_s", _FDP.TYPE_DOUBLE),
+    ("step", _FDP.TYPE_INT32),
+    ("voltage_V", _FDP.TYPE_DOUBLE),
+    ("sag_m", _FDP.TYPE_DOUBLE),
+    ("repetition", _FDP.TYPE_INT32),
+    ("direction", _FDP.TYPE_STRING),
+    ("mode", _FDP.TYPE_STRING),
+    ("design", _FDP.TYPE_INT32),
+    ("layers", _FDP.TYPE_INT32),
+    ("specimen", _FDP.TYPE_STRING),
+    ("label", _FDP.TYPE_STRING),
+]
+
+
+@cache
+def step_descriptor_set() -> bytes:
+    return _message_descriptor_set(STEP_SCHEMA, STEP_FIELDS)
+
+
+@cache
+def log_descriptor_set() -> bytes:
+    from foxglove_schemas_protobuf.Log_pb2 import Log
+    from mcap_protobuf.schema import build_file_descriptor_set
+
+    return build_file_descriptor_set(Log).SerializeToString()
+
+
+@cache
+def annotations_descriptor_set() -> bytes:
+    from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+    from mcap_protobuf.schema import build_file_descriptor_set
+
+    return build_file_descriptor_set(ImageAnnotations).SerializeToString()
 
 
 @lru_cache(maxsize=None)

@@ -21,10 +21,10 @@ def test_official_reader_reads_back_every_record(compression):
     f = w.register_channel("/frames", "protobuf", schema)
     sent = []
     for i in range(200):
-        # every tenth message is a "frame", stored uncompressed as the recorder does with frames
+        # every tenth message is a "frame", marked for stored chunks as the recorder marks frames kept whole
         channel = f if i % 10 == 0 else a if i % 3 else b
-        data = bytes([i % 256]) * (1 + i % 7)
-        w.add_message(channel, 1000 + i, data, 1000 + i, compression="" if channel == f else None)
+        data = bytes([i % 256]) * (1 + i % 7 + (600 if channel == f else 0))
+        w.add_message(channel, 1000 + i, data, 1000 + i, stored=channel == f)
         sent.append((channel, 1000 + i, data))
         if i == 100:
             w.add_metadata("middle", {"x": "1"})
@@ -38,13 +38,11 @@ def test_official_reader_reads_back_every_record(compression):
     assert (summary.statistics.message_start_time, summary.statistics.message_end_time) == (1000, 1199)
     assert summary.channels[b].metadata == {"k": "v"} and summary.channels[a].topic == "/a"
     assert len(summary.chunk_indexes) == summary.statistics.chunk_count > 20
+    # a chunk mostly of frame bytes is stored, the others compressed
     assert {c.compression for c in summary.chunk_indexes} == ({compression, ""} if compression else {""})
-    # Stored and compressed chunks are open side by side, so file order interleaves them; log-time order is the
-    # order sent, and within a channel file order is too.
+    # One chunk is open at a time: file order is the order sent, which is log-time order.
     assert [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages(log_time_order=True)] == sent
-    in_file_order = [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages(log_time_order=False)]
-    for channel in (a, b, f):
-        assert [m for m in in_file_order if m[0] == channel] == [m for m in sent if m[0] == channel]
+    assert [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages(log_time_order=False)] == sent
     assert {m.name: m.metadata for m in reader.iter_metadata()} == {"middle": {"x": "1"}, "end": {"y": "2"}}
     # the same file streamed without its summary (as a reader of a file cut short would)
     from mcap.stream_reader import StreamReader
@@ -57,21 +55,25 @@ def test_official_reader_reads_back_every_record(compression):
     assert max(i for i, k in enumerate(data_section) if k == "Channel") < data_section.index("Message")
 
 
-def test_a_frame_does_not_cut_the_scalar_chunk_short():
-    """Frames go in stored chunks of their own while scalars keep filling one compressed chunk: the scalars take
-    as many chunks as their bytes need, not one per frame."""
+def test_chunk_compression_follows_what_the_chunk_holds():
+    """A chunk at least half made of bytes marked `stored` (frames) is written uncompressed; one of scalars with
+    a few small marked messages (regions of interest are not marked, but a stray one must not matter) is
+    compressed."""
     buf = io.BytesIO()
     w = McapFileWriter(buf, chunk_size=4096, compression="lz4")
     w.start()
     schema = w.register_schema("s", "protobuf", b"")
     scalar, frames = w.register_channel("/force", "protobuf", schema), w.register_channel("/image", "protobuf", schema)
-    scalar_bytes = 0
     for i in range(400):
         w.add_message(scalar, i, b"x" * 18)
-        scalar_bytes += 31 + 18  # message record header + payload
-        if i % 8 == 0:
-            w.add_message(frames, i, b"f" * 1000, compression="")
+        if i % 160 == 0:
+            w.add_message(frames, i, b"f" * 5000, stored=True)  # closes its chunk: mostly frame bytes
+        elif i % 40 == 0:
+            w.add_message(frames, i, b"f" * 10, stored=True)
     w.finish()
     summary = make_reader(io.BytesIO(buf.getvalue())).get_summary()
-    scalar_chunks = sum(c.compression == "lz4" for c in summary.chunk_indexes)
-    assert scalar_chunks <= scalar_bytes // 4096 + 1  # 50 frames; one chunk at a time made ~50 scalar chunks
+    by_compression = {c.compression: 0 for c in summary.chunk_indexes}
+    for c in summary.chunk_indexes:
+        by_compression[c.compression] += 1
+        assert (c.compression == "") == (c.uncompressed_size > 5000)
+    assert by_compression[""] == 3 and by_compression["lz4"] >= 3  # scalars fill chunks of their own between

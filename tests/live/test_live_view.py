@@ -1,0 +1,195 @@
+"""The live view end to end: `hamr-bench run --sim --live 0` in a child process, watched by a Foxglove WebSocket
+client written from the protocol's description (benchmarks/foxglove_ws_client.py, the `websockets` package), not
+by the server's own code.
+
+- every stream of the recording reaches the client, with the file's schema, units and message bytes, while the
+  run is still going;
+- an abort without the control token is refused and the run goes on; with it the run ends `aborted` through the
+  runner's abort path (rig made safe, recording closed with the reason);
+- a client that stops reading changes nothing in the recording: it is identical, message for message, to the same
+  run recorded with no live view at all.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("foxglove")
+pytest.importorskip("websockets")
+
+from benchmarks.foxglove_ws_client import FoxgloveClient  # noqa: E402
+from hamr_bench.recording import RecordingReader  # noqa: E402
+from hamr_bench.recording import schemas  # noqa: E402
+from mcap.reader import make_reader  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+class LiveRun:
+    """A `hamr-bench run --sim --live 0` child: its URL and control token, read from what it prints."""
+
+    def __init__(self, protocol: str, out: Path, *extra: str) -> None:
+        self.out = out
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "hamr_bench", "run", protocol, "--sim", "--live", "0", "--out", str(out),
+             "--quiet", *extra],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.url = self.token = ""
+        printed = []
+        while not (self.url and self.token):
+            line = self.proc.stderr.readline()
+            if not line:
+                raise AssertionError(f"the run printed no live URL and token: {printed}")
+            printed.append(line)
+            if m := re.search(r"live view: (ws://\S+)", line):
+                self.url = m.group(1)
+            if m := re.search(r"live control token: (\S+)", line):
+                self.token = m.group(1)
+
+    def wait(self, timeout_s: float = 120.0) -> tuple[int, str]:
+        _, err = self.proc.communicate(timeout=timeout_s)
+        return self.proc.returncode, err
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def file_messages(path: Path, relative: bool = False) -> dict[str, list[tuple[int, bytes]]]:
+    """topic -> [(log time - start, payload)] in file order, read with the `mcap` package. `relative`: the
+    Foxglove messages' own timestamps (absolute, so they differ between two runs) made relative to the start too."""
+    start_ns = RecordingReader(path).start_time_ns
+    out: dict[str, list[tuple[int, bytes]]] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        for channel in reader.get_summary().channels.values():
+            out[channel.topic] = []
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            data = bytes(message.data)
+            if relative and schema.name.startswith("foxglove."):
+                data = _relative_stamps(schemas.message_class(schema.name, schema.data).FromString(data), start_ns)
+            out[channel.topic].append((message.log_time - start_ns, data))
+    return out
+
+
+def _relative_stamps(msg, start_ns: int) -> bytes:
+    for stamped in [msg, *getattr(msg, "circles", [])]:
+        if stamped.HasField("timestamp"):
+            stamped.timestamp.FromNanoseconds(stamped.timestamp.ToNanoseconds() - start_ns)
+    return msg.SerializeToString()
+
+
+def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_on(tmp_path):
+    # four repetitions (default two, ~2 s wall): the client must subscribe while frames still flow, and on a
+    # loaded machine the default run could finish its camera steps before the subscription arrived
+    run = LiveRun("free-displacement", tmp_path / "fd.mcap", "--set", "repetitions=4")
+    client = FoxgloveClient(run.url)
+    try:
+        client.start()
+        code, err = run.wait()
+        ended_ns = time.time_ns()
+    finally:
+        run.kill()
+        client.close()
+    assert code == 0, err
+    reader = RecordingReader(run.out)
+    in_file = {topic: info for topic, info in reader.topics().items() if info.message_count}
+    assert {"/force", "/camera/roi", "/camera/image", "/camera/annotations", "/log", "/step"} <= set(in_file)
+    advertised = {c.topic: c for c in client.channels.values()}
+    by_topic: dict[str, list] = {}
+    for message in client.received:
+        by_topic.setdefault(message.topic, []).append(message)
+    start_ns = reader.start_time_ns
+    recorded_messages = file_messages(run.out)
+    for topic in in_file:
+        channel = advertised.get(topic)
+        assert channel is not None, f"{topic} was never advertised"
+        stored = reader._schemas[reader._by_topic[topic].schema_id]
+        assert (channel.encoding, channel.schema_name, channel.schema) == ("protobuf", stored.name, stored.data)
+        assert channel.metadata == reader._by_topic[topic].metadata
+        got = by_topic.get(topic, [])
+        assert got, f"no message of {topic} reached the client"
+        cls = schemas.message_class(stored.name, stored.data)
+        for message in got[:50]:
+            cls.FromString(message.payload)  # decodes with the file's own schema
+        if topic == "/camera/image":
+            # whole frames: the file keeps one a second, the live view shows more (of the same frames: each at
+            # the time of a frame whose region the file holds)
+            frame_times = {t for t, _ in recorded_messages["/camera/roi"]}
+            assert all(m.log_ns - start_ns in frame_times for m in got)
+            continue
+        # each message sent is one the file holds, at its log time
+        recorded = set(recorded_messages[topic])
+        assert all((m.log_ns - start_ns, m.payload) in recorded for m in got), topic
+    assert advertised["/force"].metadata == {"unit.time_s": "s", "unit.force_N": "N"}
+    # while the run went on: most of what arrived came before the process ended
+    early = sum(m.receive_ns < ended_ns - 500_000_000 for m in client.received)
+    assert early > len(client.received) / 2
+
+
+def test_abort_needs_the_token_and_ends_the_run_aborted_with_the_rig_safe(tmp_path):
+    run = LiveRun("sag-sweep", tmp_path / "long.mcap", "--set", "repetitions=40")
+    client = FoxgloveClient(run.url, topics={"/force", "/log"})
+    try:
+        client.start()
+        assert client.wait_for(lambda c: c.counts.get("/force", 0) >= 20, 60), client.counts
+        status, message = client.call_service("/hamr_bench/abort", {"token": "guessed", "reason": "intruder"})
+        assert status == "failure" and "token" in message
+        status, message = client.call_service("/hamr_bench/abort", {"reason": "no token at all"})
+        assert status == "failure"
+        seen = client.counts["/force"]
+        assert client.wait_for(lambda c: c.counts["/force"] > seen + 20, 60), "the run stopped without a token"
+        assert run.proc.poll() is None
+        status, response = client.call_service("/hamr_bench/abort", {"token": run.token, "reason": "operator"})
+        assert status == "ok" and response["accepted"] is True
+        code, err = run.wait(60)
+    finally:
+        run.kill()
+        client.close()
+    assert code == 1 and "run aborted" in err
+    reader = RecordingReader(run.out)
+    assert reader.exit_status == "aborted"
+    assert reader.exit_reason.startswith("abort requested: live client") and "operator" in reader.exit_reason
+    kinds = [e.kind for e in reader.events()]
+    assert kinds[-2:] == ["safe_state", "run_end"] and "intruder" not in reader.exit_reason
+    for topic in ("/amplifier/bias/command", "/amplifier/drive/command"):
+        assert reader.scalars(topic)["voltage_V"][-1] == 0.0
+    steps = sum(k == "step" for k in kinds)
+    assert 0 < steps < 40 * 4  # it stopped part way
+
+
+def test_a_stalled_client_does_not_change_the_recording(tmp_path):
+    plain = tmp_path / "plain.mcap"
+    done = subprocess.run([sys.executable, "-m", "hamr_bench", "run", "free-displacement", "--sim", "--out",
+                           str(plain), "--quiet", "--seed", "3"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    run = LiveRun("free-displacement", tmp_path / "watched.mcap", "--seed", "3")
+    stalled = FoxgloveClient(run.url, stall=True)
+    reading = FoxgloveClient(run.url, topics={"/force"}, keep_payloads=False)
+    try:
+        stalled.start()
+        reading.start()
+        code, err = run.wait()
+    finally:
+        run.kill()
+        reading.close()
+        stalled.close()
+    assert code == 0, err
+    assert reading.counts.get("/force", 0) > 0  # the other client was served all along
+    a, b = file_messages(plain, relative=True), file_messages(run.out, relative=True)
+    assert a.keys() == b.keys()
+    for topic in a:
+        assert a[topic] == b[topic], f"{topic} differs"
+    watched = RecordingReader(run.out).metadata()["run_end"]
+    assert watched["dropped_total"] == "0" and watched["late_by_topic"] == RecordingReader(plain).metadata()[
+        "run_end"]["late_by_topic"]
+    assert np.array_equal(RecordingReader(plain).scalars("/camera/displacement")["y_px"],
+                          RecordingReader(run.out).scalars("/camera/displacement")["y_px"])
