@@ -325,8 +325,8 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
         return out
     monitored = _scalars(reader, Topic.DRIVE_MONITOR, "voltage_V")
     if monitored is None:
-        raise RecordingError(f"{reader.path}: drive_start events but neither /amplifier/drive/command nor "
-                             "/amplifier/drive/monitor to replay the waveform from")
+        raise RecordingError(f"{reader.path}: drive_start events but neither {Topic.DRIVE_COMMAND} nor "
+                             f"{Topic.DRIVE_MONITOR} to replay the waveform from")
     # The drive as the recording contract infers it from the monitor (each cycle's corners and level): the
     # waveform the monitor measured, without its noise and overshoot, which the twin's amplifier would otherwise
     # be told to reproduce. Where no cycle is found, the monitor itself.

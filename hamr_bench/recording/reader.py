@@ -22,6 +22,7 @@ import numpy as np
 
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
+from hamr_bench.recording.contract import MetadataName, Topic
 from hamr_bench.recording.index_scan import (
     SMALL_CHUNK,
     BATCH_BYTES,
@@ -266,11 +267,11 @@ class RecordingReader:
     @property
     def exit_status(self) -> str | None:
         """'success' | 'aborted' | 'failed', or None if the run never recorded its end (killed writer)."""
-        return self._metadata.get("run_end", {}).get("exit_status")
+        return self._metadata.get(MetadataName.RUN_END, {}).get("exit_status")
 
     @property
     def exit_reason(self) -> str | None:
-        return self._metadata.get("run_end", {}).get("reason")
+        return self._metadata.get(MetadataName.RUN_END, {}).get("reason")
 
     def topics(self) -> dict[str, TopicInfo]:
         out: dict[str, TopicInfo] = {}
@@ -326,12 +327,12 @@ class RecordingReader:
         return {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
 
     def events(self) -> list[Event]:
-        if schemas.EVENTS_TOPIC not in self._by_topic:
+        if Topic.EVENTS not in self._by_topic:
             return []
-        cls = self._message_class(schemas.EVENTS_TOPIC)
+        cls = self._message_class(Topic.EVENTS)
         out = []
-        for payload in self._stream(schemas.EVENTS_TOPIC).payloads():
-            msg = self._parse(cls, payload, schemas.EVENTS_TOPIC)
+        for payload in self._stream(Topic.EVENTS).payloads():
+            msg = self._parse(cls, payload, Topic.EVENTS)
             try:
                 data = json.loads(msg.data) if msg.data else {}
             except ValueError:
@@ -348,7 +349,7 @@ class RecordingReader:
             for m in (self._parse(cls, p, topic) for p in self._stream(topic).payloads())
         ]
 
-    def images(self, topic: str = "/camera/image") -> Iterator[Image]:
+    def images(self, topic: str = Topic.CAMERA_IMAGE) -> Iterator[Image]:
         """Frames in file order, read from disk chunk by chunk."""
         channel = self._channel(topic)
         schema_name = self._schema_name(channel.id)
@@ -391,7 +392,7 @@ class RecordingReader:
     # ------------------------------------------------------------------ helpers
 
     def _start_time_ns(self) -> int:
-        value = self._metadata.get("recording", {}).get("start_time_ns")
+        value = self._metadata.get(MetadataName.RECORDING, {}).get("start_time_ns")
         if value is not None:
             try:
                 return int(value)
