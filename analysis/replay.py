@@ -375,7 +375,7 @@ DESIGN_FIT_FIELDS = {"k_ser": "k_ser_N_per_m", "bias": "bias_m"}
 
 
 def _value(entry: Any, where: str) -> float:
-    value = entry.get("value") if isinstance(entry, dict) else entry
+    value: Any = entry.get("value") if isinstance(entry, dict) else entry
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -408,17 +408,18 @@ def model_overrides_from_fit(fit_path: Path | str, design: int | None, layers: i
         if values:
             out["actuator"] = values
     group = (doc.get("designs") or {}).get(str(design)) if design is not None and fixture == "leg" else None
-    if isinstance(group, dict):
-        values = {field_name: _value(group[key], f"{fit_path}: designs.{design}.{key}")
-                  for key, field_name in DESIGN_FIT_FIELDS.items() if key in group}
+    if isinstance(group, dict) and design is not None:
+        design_values: dict[str, Any] = {
+            field_name: _value(group[key], f"{fit_path}: designs.{design}.{key}")
+            for key, field_name in DESIGN_FIT_FIELDS.items() if key in group}
         kappas = [f"kappa_{i}" for i in (1, 2, 3)]
         if any(k in group for k in kappas):
             preset = design_preset(design).kappa_N_m_per_rad
-            values["kappa_N_m_per_rad"] = [
+            design_values["kappa_N_m_per_rad"] = [
                 _value(group[k], f"{fit_path}: designs.{design}.{k}") if k in group else float(preset[i])
                 for i, k in enumerate(kappas)]
-        if values:
-            out["design"] = values
+        if design_values:
+            out["design"] = design_values
     if not out:
         raise ConfigError(f"--params {fit_path}: has no actuators.{layers}"
                           + (f" or designs.{design}" if design is not None and fixture == "leg" else "")

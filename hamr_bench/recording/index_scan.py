@@ -127,7 +127,7 @@ class ChannelRun:
 
     __slots__ = ("channel_id", "log_times", "chunk_offsets", "_buf", "_starts", "_ends")
 
-    def __init__(self, channel_id: int, log_times: np.ndarray, chunk_offsets: np.ndarray, buf: np.ndarray | None,
+    def __init__(self, channel_id: int, log_times: np.ndarray, chunk_offsets: np.ndarray, buf: np.ndarray,
                  starts: np.ndarray, ends: np.ndarray) -> None:
         self.channel_id = channel_id
         self.log_times = log_times  # int64 ns

@@ -39,6 +39,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
             crc_error = str(exc)
             reader = RecordingReader(path, validate_crcs=False)
     status = reader.status
+    crc: dict[str, Any]
     if crc_error is not None:
         crc = {"result": "failed", "error": crc_error}
     else:
@@ -49,7 +50,8 @@ def summarise(path: Path | str) -> dict[str, Any]:
             "summary_section": status.summary_crc,
         }
     topics = []
-    first_times, last_times = [], []
+    first_times: list[float] = []
+    last_times: list[float] = []
     for info in reader.topics().values():
         topics.append(
             {
@@ -61,7 +63,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
                 "last_time_s": info.last_time_s,
             }
         )
-        if info.first_time_s is not None:
+        if info.first_time_s is not None and info.last_time_s is not None:
             first_times.append(info.first_time_s)
             last_times.append(info.last_time_s)
     metadata = reader.metadata()

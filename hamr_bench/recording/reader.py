@@ -39,6 +39,7 @@ from hamr_bench.recording.scan import (
     ChannelRecord,
     MessageRecord,
     MetadataRecord,
+    Policy,
     SchemaRecord,
     ScanStatus,
     read_chunk_messages,
@@ -152,7 +153,7 @@ class RecordingReader:
         self.chunks_indexed = 0  # chunks whose messages were taken through their message indexes
 
     def _load(self, indexed: bool) -> None:
-        policy = "strict" if self.validate_crcs else "lenient"
+        policy: Policy = "strict" if self.validate_crcs else "lenient"
         if not indexed:
             for record in scan(self.path, policy, self.status):
                 self._take(record)
@@ -161,13 +162,13 @@ class RecordingReader:
         # later message is taken (a schema, a channel, a message outside the batch) and at the end.
         batch = IndexBatch()
         try:
-            for record in scan_indexed(self.path, policy, self.status):
-                if isinstance(record, ChunkCandidate):
-                    self._add_chunk(batch, record)
+            for item in scan_indexed(self.path, policy, self.status):
+                if isinstance(item, ChunkCandidate):
+                    self._add_chunk(batch, item)
                     continue
-                if len(batch) and not isinstance(record, MetadataRecord):
+                if len(batch) and not isinstance(item, MetadataRecord):
                     self._drain(batch)
-                self._take(record)
+                self._take(item)
         except RecordingError:
             # The plain scan would have walked the waiting chunks before failing here: if one of them does not
             # pass, that walk might have failed first, with another message.
@@ -302,7 +303,7 @@ class RecordingReader:
             if schema is not None and schema.encoding == "protobuf"
             else None
         )
-        if fields is None:
+        if fields is None or schema is None:
             raise RecordingError(
                 f"{self.path}: topic {topic} is not a scalar stream (schema {self._schema_name(channel.id)})"
             )
