@@ -187,8 +187,7 @@ class AtiNano17:
             # (`samples_before`) so the caller can keep them.
             good = self._good_prefix(data)
             force = self._sign * self._convert(data[:, :good])[self._axis] if good else np.empty(0)
-            exc.samples_before = [ForceSample(t, f)  # type: ignore[attr-defined]
-                                  for t, f in zip(times[:good].tolist(), force.tolist())]
+            exc.samples_before = [ForceSample(t, f) for t, f in zip(times[:good].tolist(), force.tolist())]
             raise
         return [ForceSample(t, f) for t, f in zip(times.tolist(), force.tolist())]
 

@@ -180,7 +180,7 @@ def fault_moments(protocol: str, tmp_factory: Any) -> dict[str, float]:
     out = tmp_factory.mktemp("moments") / f"{protocol}.mcap"
     run_cli(protocol, out)
     events = RecordingReader(out).events()
-    first = {}
+    first: dict[str, float] = {}
     for event in events:
         first.setdefault(event.kind, event.time_s)
     steps = [e.time_s for e in events if e.kind == "step"]
@@ -263,6 +263,8 @@ class FaultOutcome:
     @property
     def time_to_safe_s(self) -> float:
         """From the fault to the moment both DAQ outputs sit at 0 V and the stage has stopped (rig clock)."""
+        if self.safe is None:
+            raise ValueError("no safe-state measure: the fault is not modelled")
         done = max(max(self.safe.zero_V_at_s.values()), self.safe.stage_still_at_s)
         return max(done - self.first_use_s, 0.0)
 
