@@ -352,16 +352,22 @@ def daq_output_staircase(daq: Any, channel: str) -> tuple[np.ndarray, np.ndarray
 # ---------------------------------------------------------------------------------------------------- SIGKILL
 def topic_payloads(path: Path) -> dict[str, list[bytes]]:
     """Every message of a finished recording, per topic, in file order, as what identifies the sample: the payload
-    bytes (camera frames: the encoded image only, since their timestamp carries the run's start epoch)."""
+    bytes (camera frames: the encoded image only, and log lines without their timestamp, since those timestamps
+    carry the run's start epoch)."""
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from foxglove_schemas_protobuf.Log_pb2 import Log
     from mcap.reader import make_reader
 
     out: dict[str, list[bytes]] = {}
     with open(path, "rb") as f:
-        for _schema, channel, message in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False):
+        for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False):
             data = message.data
             if channel.topic == "/camera/image":
                 data = CompressedImage.FromString(data).data
+            elif schema is not None and schema.name == "foxglove.Log":
+                line = Log.FromString(data)
+                line.ClearField("timestamp")
+                data = line.SerializeToString()
             out.setdefault(channel.topic, []).append(data)
     return out
 
