@@ -293,7 +293,7 @@ def bench_fit(ctx: Context) -> list[dict]:
 
 def bench_gap(ctx: Context) -> list[dict]:
     try:
-        from analysis.gap.attribution import diagnose
+        from analysis.gap.diagnose import diagnose
         from analysis.gap.features import load_gap_data
     except ImportError as exc:
         return [record("gap.diagnose_campaign_s", None, "s", note=f"analysis.gap not available yet ({exc})")]

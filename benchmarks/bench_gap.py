@@ -14,7 +14,7 @@ import time
 
 
 def bench_campaign(directory: str) -> None:
-    from analysis.gap.attribution import diagnose
+    from analysis.gap.diagnose import diagnose
     from analysis.gap.features import load_gap_data
 
     t0 = time.perf_counter()
@@ -23,10 +23,12 @@ def bench_campaign(directory: str) -> None:
     result = diagnose(data)
     t2 = time.perf_counter()
     print(f"campaign {directory}: {len(data.runs)} runs, {len(data.rows)} rows")
-    print(f"load {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, total {t2 - t0:.1f} s; best = {result['best']}")
-    for e in result["ranking"][:3]:
-        print(f"  {e['effect']}: {e['verdict']}, strength {e['strength']}, CI {e['strength_ci95']}, "
-              f"reduction {e['reduction']}, CI {e['reduction_ci95']}")
+    print(f"load {t1 - t0:.1f} s, diagnose {t2 - t1:.1f} s, total {t2 - t0:.1f} s; best = {result.best}")
+    for w in result.waterfall:
+        print(f"  {w.added or 'nominal'}: held-out RMS {w.heldout.rms:.2f} {list(w.heldout.ci95)}"
+              + (f" (or {', '.join(w.ambiguous_with)})" if w.ambiguous_with else ""))
+    for e in result.named:
+        print(f"  {e.name}: {e.verdict}, strength {e.strength:.4g} {list(e.strength_ci95)}")
 
 
 def bench_selfcheck(n: int, seed: int, jobs: int) -> None:

@@ -146,7 +146,7 @@ def _value(annotation: Any, value: Any, name: str, place: Place, check: Check | 
             raise ConfigError(f"{where}: expected a non-empty list, got {value!r}")
         return tuple(_value(args[0], v, name, place, check, None, from_text) for v in value)
     if origin is dict:
-        return _table_of_numbers(where, value)
+        return _table_of_tables(where, value) if typing.get_origin(args[1]) is dict else _table_of_numbers(where, value)
     if annotation in _SCALARS:
         return _SCALARS[annotation](where, value, check, from_text)
     raise ConfigError(f"{where}: cannot be set from a file")
@@ -217,6 +217,13 @@ def _pair(where: str, value: Any) -> tuple[float, float]:
             and value[0] < value[1]):
         raise ConfigError(f"{where}: expected [low, high] with low < high, got {value!r}")
     return float(value[0]), float(value[1])
+
+
+def _table_of_tables(where: str, value: Any) -> dict[str, dict[str, Any]]:
+    """A table of tables (`effect_shapes = { hysteresis = { r0 = 0.4 } }`); each inner table is checked by its user."""
+    if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+        raise ConfigError(f"{where}: expected a table of tables, e.g. {{ hysteresis = {{ r0 = 0.4 }} }}")
+    return {str(k): dict(v) for k, v in value.items()}
 
 
 def _table_of_numbers(where: str, value: Any) -> dict[str, float]:

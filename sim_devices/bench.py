@@ -1,17 +1,22 @@
-"""The simulated bench: one object that owns the physics (the powertrain model plus realistic-bench effects), the
-clock and the random generator, with the device emulators as its ports.
+"""The simulated bench: one object that owns the physics (the specimen's powertrain, the realistic-bench effects and
+the bench's dynamics), the clock and the random generators, with the device emulators as its ports.
 
 Geometry. The stage carries the force sensor along one axis. At stage position `touch_stage_m` the sensor surface
 just meets the undriven foot (leg fixture) or actuator tip (actuator fixture); moving the stage by +d in
-`toward_sign` pushes the surface d further in. In the model's terms the surface holds the foot at height
-h = (stage - touch) x toward_sign (the sag), and the foot, when it reaches it, presses with
-`Powertrain.foot_force_N(V_bias, V_drive, h)`. For the actuator the surface sits at tip deflection
-q = (touch - stage) x toward_sign and the tip presses with `tip_force_N`. With `sensor_compliance` the surface
-gives way by F / k_sensor (solved by a few fixed-point steps: the sensor is far stiffer than a leg).
+`toward_sign` pushes the surface d further in. The physics in time (sim_devices.plant) works in one coordinate x
+along that axis, positive toward the sensor: the foot's downward travel from the neutral the bench started with, or
+the actuator tip's deflection; the surface sits at x_s = -(stage - touch) x sign.
+
+What is simulated (docs/model.md, "The simulated bench"): the drive chain per PZT plate (sim_devices.drive_chain),
+the plant's dynamics (a free mode: the bare actuator's tip or the loaded leg; a contact mode with the sensor's
+stiffness and moving mass), the contact statics from the powertrain model (sim_devices.contact_statics), the
+sensor's element and conditioning (the Loadstar averages over its conversion period; the Nano17's gauges are
+sampled by the DAQ as they are), and the effects switched on by name (sim_devices.bench_effects). A specimen seed
+draws this specimen's parameters within fabrication tolerances (sim_devices.specimens).
 
 Ports: an SMC100 emulator (stage), a Loadstar emulator (leg force sensor) or a Nano17 on the simulated DAQ
-(actuator force sensor), HV amplifiers on the simulated DAQ, and a camera that renders the marker where the model
-puts the foot or tip. `ports()` gives what a rig builder hands the real drivers.
+(actuator force sensor), HV amplifiers on the simulated DAQ, and a camera that renders the marker where the plant
+is. `ports()` gives what a rig builder hands the real drivers.
 """
 
 from __future__ import annotations
@@ -25,16 +30,17 @@ import numpy as np
 
 from hamr_bench.clock import Clock, VirtualClock
 from hamr_bench.errors import ConfigError
-from hamr_bench.model import actuator as act
 from hamr_bench.model import actuator_preset, design_preset
 from hamr_bench.model.powertrain import Powertrain
-from sim_devices.bench_effects import DriveMemory, check_effects, model_effects
+from sim_devices.bench_effects import check_effects, check_shapes, model_effects
+from sim_devices.bench_physics import GRID_STEP_S, PlantInputs, build_plant
 from sim_devices.camera_sim import SimCamera, SimCameraSpec
 from sim_devices.daq_sim import SimAmplifierSpec, SimDaq, SimNano17Spec, load_calibration_SI
 from sim_devices.loadstar_emulator import LoadstarEmulator, LoadstarParams
 from sim_devices.serial_link import register_endpoint, unregister_endpoint
 from sim_devices.smc100_emulator import Smc100Emulator, Smc100Params
 from sim_devices.smc100_protocol import Smc100Protocol
+from sim_devices.specimens import draw_specimen
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 NANO17_CAL = DATA_DIR / "nano17_sim.cal"
@@ -50,7 +56,13 @@ class BenchSettings:
     layers: int = 2
     params_set: str = "effective"
     effects: dict[str, float] = field(default_factory=dict)
+    # shape parameters of the effects' generator forms ({effect: {parameter: value}}; defaults per effect)
+    effect_shapes: dict[str, dict[str, float]] = field(default_factory=dict)
     seed: int = 0
+    # draw this specimen's parameters within fabrication tolerances (None: the presets exactly)
+    specimen_seed: int | None = None
+    # the plant's dynamics (False: every position and force the quasi-static solution at once)
+    dynamics: bool = True
     touch_stage_m: float = 2.0e-3
     toward_sign: float = 1.0
     stage_limits_m: tuple[float, float] = (-5e-3, 12e-3)
@@ -125,24 +137,33 @@ class SimBench:
         self.clock = clock or VirtualClock()
         # One independent stream per device, so the noise a device draws does not depend on how often the others
         # were asked (a replay that polls in a different order still sees the same force noise).
-        streams = np.random.SeedSequence(s.seed).spawn(4)
+        streams = np.random.SeedSequence(s.seed).spawn(5)
         self.rng = {name: np.random.default_rng(seq) for name, seq in zip(("daq", "stage", "force", "camera"),
-                                                                             streams)}
-        effects = check_effects(dict(s.effects), "sim effects")
-        self.effects = effects
-        actuator, design = apply_model_overrides(actuator_preset(s.layers, s.params_set), design_preset(s.design),
-                                                 s.model_overrides)
-        self.powertrain = Powertrain(actuator, design, model_effects(effects))
+                                                                             streams[:4], strict=True)}
+        physics_seed = int(streams[4].generate_state(1)[0])
+        self.effects = check_effects(dict(s.effects), "sim effects")
+        self.effect_shapes = check_shapes(dict(s.effect_shapes), "sim effect_shapes")
+        actuator, design = actuator_preset(s.layers, s.params_set), design_preset(s.design)
+        if s.specimen_seed is not None:
+            drawn = draw_specimen(s.specimen_seed, actuator.__dict__, design.__dict__)
+            actuator, design = apply_model_overrides(actuator, design, drawn)
+        actuator, design = apply_model_overrides(actuator, design, s.model_overrides)
+        self.powertrain = Powertrain(actuator, design, model_effects(self.effects))
         self.actuator = self.powertrain.actuator
-        self.sensor_compliance_m_per_N = effects.get("sensor_compliance", 0.0)
-        self._free_height_table = self._tabulate_free_height() if s.fixture == "leg" else None
-        self._force_cache: dict[tuple[float, float, float], float] = {}
         self._name = f"bench{next(_bench_ids)}"
         self._endpoints: list[str] = []
         self._build_daq()
-        self.memory = DriveMemory(self._commanded_outputs, effects.get("hysteresis", 0.0),
-                                  effects.get("creep", 0.0))
         self._build_stage()
+        try:
+            self.plant = build_plant(
+                PlantInputs(s.fixture, self.effects, self.effect_shapes, physics_seed, s.dynamics, GRID_STEP_S,
+                            s.touch_stage_m, s.toward_sign),
+                self.powertrain, self.daq, self.stage, self.powertrain.voltage_limit_V, self.clock.now_s())
+        except ValueError as exc:   # an effect strength or shape the generator form cannot realise
+            self.close()
+            raise ConfigError(f"sim effects: {exc}") from None
+        self.daq.output_listeners.append(self.plant.invalidate)
+        self.stage.motion_listeners.append(self.plant.invalidate)
         if s.fixture == "leg":
             self._build_loadstar()
         self._build_camera()
@@ -169,21 +190,20 @@ class SimBench:
 
     def _build_stage(self) -> None:
         s = self.settings
-        low, high = s.stage_limits_m
-        params = Smc100Params(soft_limit_low_m=low, soft_limit_high_m=high,
-                              velocity_m_per_s=s.stage_velocity_m_per_s,
-                              backlash_m=self.effects.get("stage_backlash", 0.0))
+        # The stage's play and drive compliance (effect stage_backlash) are the bench's carriage model, not the
+        # controller's: the emulator's carriage follows its motor exactly.
+        params = Smc100Params(soft_limit_low_m=s.stage_limits_m[0], soft_limit_high_m=s.stage_limits_m[1],
+                              velocity_m_per_s=s.stage_velocity_m_per_s)
         self.stage = Smc100Emulator(self.clock, params)
         self.stage_protocol = Smc100Protocol(self.stage, self.rng["stage"])
         self.stage_url = self._register("stage", self.stage_protocol)
 
     def _build_loadstar(self) -> None:
         s = self.settings
-        drift = self.effects.get("sensor_drift", 0.0)
         params = LoadstarParams(command_set=s.loadstar_command_set, units="KG", capacity=s.loadstar_capacity_kg,
-                                resolution=s.loadstar_resolution_kg, noise_counts=1.0 if s.noise else 0.0,
-                                drift="random_walk" if drift else "none", drift_strength=drift)
+                                resolution=s.loadstar_resolution_kg, noise_counts=1.0 if s.noise else 0.0)
         self.loadstar = LoadstarEmulator(self.clock, self.contact_force_N, self.rng["force"], params)
+        self.conversion_s = 1.0 / params.stream_rate_Hz
         self.force_sensor_url = self._register("force", self.loadstar)
 
     def _build_camera(self) -> None:
@@ -224,136 +244,19 @@ class SimBench:
             unregister_endpoint(name)
         self._endpoints.clear()
 
-    # ------------------------------------------------------------------ physics
-    def _commanded_outputs(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        vb = np.asarray(self.daq.output_voltage_V("ao0", times_s), dtype=float)
-        vd = np.asarray(self.daq.output_voltage_V("ao1", times_s), dtype=float)
-        # The model refuses voltages beyond its limit; the amplifier's own lag can overshoot by a hair.
-        return self._clip_to_limit(vb), self._clip_to_limit(vd)
-
-    def _clip_to_limit(self, volts: np.ndarray) -> np.ndarray:
-        """`np.clip(volts, -limit, limit)` (the same values) without its wrapper's cost, asked per sensor read."""
-        limit = self.powertrain.voltage_limit_V
-        return np.minimum(np.maximum(volts, -limit), limit)
-
-    def _tabulate_free_height(self) -> tuple[np.ndarray, np.ndarray]:
-        """Free foot height as a function of the actuator's free deflection u, which is all it depends on. The
-        quasi-static solve costs ~1 ms a call; the bench asks thousands of times per simulated second, so it
-        interpolates this table (error below 0.1 um, checked in tests) instead."""
-        limit = self.powertrain.voltage_limit_V
-        v_drive = np.linspace(0.0, limit, 2001)
-        u = self.powertrain.free_actuator_deflection_m(limit, v_drive)
-        h = self.powertrain.free_foot_height_m(limit, v_drive)
-        order = np.argsort(u)
-        return u[order], h[order]
-
-    def free_foot_height_m(self, vb, vd) -> np.ndarray:
-        u_tab, h_tab = self._free_height_table
-        return np.interp(self.powertrain.free_actuator_deflection_m(vb, vd), u_tab, h_tab)
-
-    def drive_many(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Effective (V_bias, V_drive) the actuator acts on at each time, after drive-memory effects."""
-        times_s = np.asarray(times_s, dtype=float)
-        if not self.memory.active:  # the commanded outputs, clipped already
-            return self._commanded_outputs(times_s)
-        vb, vd = self.memory.many(times_s)
-        return self._clip_to_limit(vb), self._clip_to_limit(vd)
-
-    def _drive_scalar(self, time_s: float) -> tuple[float, float]:
-        """`drive_many` for one time in plain floats (the same values; asked once per force-sensor sample)."""
-        if self.memory.active:
-            vb, vd = self.drive_many(np.array([time_s]))
-            return float(vb[0]), float(vd[0])
-        limit = self.powertrain.voltage_limit_V
-        vb = self.daq.output_voltage_V("ao0", time_s)
-        vd = self.daq.output_voltage_V("ao1", time_s)
-        return min(max(vb, -limit), limit), min(max(vd, -limit), limit)
-
-    def surface_m(self, times_s: np.ndarray) -> np.ndarray:
-        """How far the sensor surface is pushed in past first touch (the sag, for the leg), at each time."""
-        s = self.settings
-        positions = np.array(self.stage.positions_m(np.atleast_1d(times_s).tolist()))
-        return (positions - s.touch_stage_m) * s.toward_sign
-
-    def _pressing_force(self, vb: np.ndarray, vd: np.ndarray, surface_m: np.ndarray,
-                        free_height_m: np.ndarray | None = None) -> np.ndarray:
-        """Force on a rigid surface `surface_m` in past first touch; 0 out of contact (vectorised). The model is
-        only asked where there is contact: a surface far from the foot may lie outside the linkage's reach.
-        `free_height_m` (leg only): the free foot height at (vb, vd), when the caller has it already."""
-        vb, vd, surface_m = (np.asarray(a, dtype=float) for a in (vb, vd, surface_m))
-        if not vb.shape == vd.shape == surface_m.shape:
-            vb, vd, surface_m = np.broadcast_arrays(vb, vd, surface_m)
-        force = np.zeros(surface_m.shape)
-        vmap = self.powertrain.plate_voltage_map
-        if self.settings.fixture == "leg":
-            if free_height_m is None:
-                free_height_m = self.free_foot_height_m(vb, vd)
-            touching = free_height_m < surface_m
-            if touching.any():
-                force[touching] = self.powertrain.foot_force_N(vb[touching], vd[touching], surface_m[touching])
-        else:
-            q = -surface_m  # tip deflection (positive toward the sensor) where the surface sits
-            touching = act.free_tip_deflection_m(self.actuator, vb, vd, vmap) > q
-            if touching.any():
-                force[touching] = act.tip_force_N(self.actuator, vb[touching], vd[touching], q[touching], vmap)
-        force[~np.isfinite(force)] = 0.0
-        return np.maximum(force, 0.0)
-
+    # ------------------------------------------------------------------ what the sensors and the camera see
     def contact_forces_N(self, times_s: np.ndarray) -> np.ndarray:
-        """True force between foot (or tip) and sensor at each time."""
-        times_s = np.atleast_1d(np.asarray(times_s, dtype=float))
-        vb, vd = self.drive_many(times_s)
-        return self._contact_from_state(vb, vd, self.surface_m(times_s))
-
-    def _contact_from_state(self, vb: np.ndarray, vd: np.ndarray, surface: np.ndarray) -> np.ndarray:
-        force = self._pressing_force(vb, vd, surface)
-        c = self.sensor_compliance_m_per_N
-        if c > 0 and np.any(force > 0):
-            force = self._compliant_contact(vb, vd, surface, force, c)
-        return force
-
-    def _compliant_contact(self, vb, vd, surface, rigid_force, c: float) -> np.ndarray:
-        """Force when the sensor itself gives way by F c: the root of g(F) = F - P(surface - F c) on
-        [0, P(surface)], P the rigid pressing force. g rises monotonically (P falls as the surface retreats), so
-        bisection always converges, whether the sensor is much stiffer than the leg or, as against a bare
-        actuator, softer (where a plain fixed-point iteration oscillates)."""
-        lo = np.zeros_like(rigid_force)
-        hi = np.array(rigid_force, dtype=float)
-        for _ in range(48):  # 2^-48 of the rigid force: far below any sensor's resolution
-            mid = 0.5 * (lo + hi)
-            above = mid - self._pressing_force(vb, vd, surface - mid * c) > 0
-            hi = np.where(above, mid, hi)
-            lo = np.where(above, lo, mid)
-        return 0.5 * (lo + hi)
+        """The force the sensor's element carries at each time (the Nano17's gauges, sampled as they are)."""
+        return self.plant.forces_N(np.atleast_1d(np.asarray(times_s, dtype=float)))
 
     def contact_force_N(self, time_s: float) -> float:
-        """Scalar form for the serial sensor emulator, which asks once per sample. During dwells the drive and
-        the stage hold still, so the same state recurs for hundreds of samples: remember the last answers."""
-        time_s = float(time_s)
-        vb, vd = self._drive_scalar(time_s)
-        s = self.settings
-        surface = (self.stage.position_m(time_s) - s.touch_stage_m) * s.toward_sign
-        key = (vb, vd, surface)
-        force = self._force_cache.get(key)
-        if force is None:
-            force = float(self._contact_from_state(np.array([vb]), np.array([vd]), np.array([surface]))[0])
-            if len(self._force_cache) > 4096:
-                self._force_cache.clear()
-            self._force_cache[key] = force
-        return force
+        """The Loadstar's reading before its own noise and quantisation: the force averaged over the conversion
+        period that ends at `time_s`."""
+        return self.plant.mean_force_N(float(time_s), self.conversion_s)
 
     def marker_position_m(self, time_s: float) -> float:
         """Displacement of the marker (foot down / tip toward the sensor positive) from its undriven rest."""
-        t = np.array([time_s])
-        vb, vd = self.drive_many(t)
-        surface = self.surface_m(t)
-        force = self._pressing_force(vb, vd, surface) if not self.sensor_compliance_m_per_N else \
-            self.contact_forces_N(t)
-        if force[0] > 0:
-            return float(-(surface[0] - force[0] * self.sensor_compliance_m_per_N))
-        if self.settings.fixture == "leg":
-            return float(-self.free_foot_height_m(vb, vd)[0])
-        return float(act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain.plate_voltage_map)[0])
+        return float(self.plant.positions_m(np.array([float(time_s)]))[0])
 
     def marker_px(self, time_s: float) -> tuple[float, float]:
         """Image position of the marker: displacement runs down the image (+y)."""
@@ -362,19 +265,9 @@ class SimBench:
 
     def marker_px_many(self, times_s: np.ndarray) -> np.ndarray:
         """`marker_px` at every time of `times_s` in one vectorised pass, shape (n, 2): the camera asks for all the
-        motion samples of an exposure at once (per-sample calls dominated the camera protocol's cost)."""
+        motion samples of an exposure at once."""
         t = np.atleast_1d(np.asarray(times_s, dtype=float))
-        vb, vd = self.drive_many(t)
-        surface = self.surface_m(t)
-        c = self.sensor_compliance_m_per_N
-        if self.settings.fixture == "leg":
-            height = self.free_foot_height_m(vb, vd)
-            free = -height
-        else:
-            height = None
-            free = act.free_tip_deflection_m(self.actuator, vb, vd, self.powertrain.plate_voltage_map)
-        force = self._pressing_force(vb, vd, surface, height) if not c else self.contact_forces_N(t)
-        position_m = np.where(force > 0, -(surface - force * c), free)
+        position_m = self.plant.positions_m(t)
         x0, y0 = self.settings.marker_origin_px
         return np.column_stack([np.full(t.shape, float(x0)), y0 + position_m / self.settings.metres_per_pixel])
 
@@ -383,9 +276,16 @@ class SimBench:
     def truth(self) -> dict[str, Any]:
         """The parameters this bench simulates with, for the recording's metadata (fit-back tests read it)."""
         a, d = self.actuator, self.powertrain.design
+        spec = self.plant.spec
         return {
             "actuator": {k: getattr(a, k) for k in a.__dataclass_fields__ if isinstance(getattr(a, k), float)},
             "design": {"k_ser_N_per_m": d.k_ser_N_per_m, "kappa_N_m_per_rad": list(map(float, d.kappa_N_m_per_rad)),
                        "bias_m": d.bias_m},
             "effects": dict(self.effects),
+            "effect_shapes": {k: dict(v) for k, v in self.effect_shapes.items()},
+            "specimen_seed": self.settings.specimen_seed,
+            "dynamics": {"enabled": self.settings.dynamics, "free_frequency_Hz": spec.free_frequency_Hz,
+                         "free_damping_ratio": spec.damping_ratio,
+                         "contact_frequency_Hz": spec.contact_frequency_Hz,
+                         "sensor_stiffness_N_per_m": spec.sensor_stiffness_N_per_m},
         }

@@ -1,228 +1,203 @@
 """The realistic-bench effects: how the simulated bench departs from the nominal model, switched on by name and
-strength (rig file `[sim] effects` or `--effects`). Strength 0 (or absent) gives back the nominal bench exactly.
+strength (rig file `[sim] effects`, `--effects NAME=STRENGTH`) with optional shape parameters (`[sim]
+effect_shapes = { NAME = { PARAM = VALUE } }`). Strength 0 (or absent) gives back the bench without that effect
+exactly: its stage is skipped.
 
-These are the GENERATOR forms. The gap diagnosis (`analysis`) fits its own candidate forms of the same physical
-effects, deliberately different (e.g. Bouc-Wen hysteresis here, a play operator there), so that finding an effect
-is not circular. Each effect lands in one of four places:
+These are the GENERATOR forms. The gap diagnosis (`analysis`) fits its own candidate families, and the two share
+no formula (coordinator's partition, /work/coord/notes/forms.md; docs/gap.md lists the pairs). Where each lands:
 
-- drive memory (`hysteresis`, `creep`): operators on the net drive signal s = 2 V_drive - V_bias, integrated on a
-  fixed time grid by `DriveMemory`;
-- model hooks (`field_dependent_d31`, `base_compliance`, `width_loss`, `bias_error`): `hamr_bench.model` effects
-  built here with generator-specific forms;
-- contact (`sensor_compliance`): the force sensor's own spring, solved in the bench's contact;
-- device emulators (`stage_backlash`, `sensor_drift`): parameters of the SMC100 and Loadstar emulators.
+- drive chain (sim_devices.drive_chain): `hysteresis` (Preisach, sim_devices.preisach), `creep` (Kelvin-Voigt /
+  Prony chain), `field_dependent_d31` (monotone knots or logistic in field), `amplifier_gain_error` (decoy);
+- model parameters (this module, as `hamr_bench.model` effect hooks): `width_loss`, `pzt_thickness`,
+  `pzt_modulus`, `grounding_lengthening` (the clamp line moved back), `flexure_softening` (decoy);
+- contact (sim_devices.contact_statics): `base_compliance` (a hardening or push/pull clamp in the mechanics),
+  `sensor_compliance` (the mount's spring in series with the sensor), `foot_friction`, `bias_error` (the Kapton's
+  relaxation of the bias, time-varying);
+- stage and sensor (sim_devices.stage_carriage, sensor_drift): `stage_backlash` (play + stick-slip drive),
+  `sensor_drift` (warm-up + Ornstein-Uhlenbeck), `mount_thermal_drift` (decoy).
 
-Realistic strengths (physics notes section 4) are in `REALISTIC`; `describe()` documents units.
+`describe()` prints the table with units, realistic values and shape parameters (the same table is in
+docs/rig-file.md). Sources of the realistic values: docs/model.md, "The simulated bench".
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from hamr_bench.errors import ConfigError
 from hamr_bench.model import Effect
 from hamr_bench.model import actuator as act
 
-# name -> (unit of strength, what it means, a realistic strength)
-EFFECTS: dict[str, tuple[str, str, float]] = {
-    "hysteresis": ("fraction", "Bouc-Wen loop on the drive; strength = loop half-width / full drive", 0.12),
-    "creep": ("per decade", "drift while a drive level is held (Prony series); strength = growth per decade", 0.02),
-    "field_dependent_d31": ("fraction", "d31 rises with field (tanh law); strength = gain at 2 V/um", 0.25),
-    "base_compliance": ("fraction", "imperfect actuator grounding; strength = blocked-force loss at the tip", 0.2),
-    "width_loss": ("fraction", "laser-cut edge loss; strength = fraction of the nominal width lost", 0.15),
-    "bias_error": ("m", "the transmission's actual bias minus its designed bias", 30e-6),
-    # realistic: a sensor 10x stiffer than the 2-layer actuator (~2000 N/m), ~9 % force loss (physics notes s. 4)
-    "sensor_compliance": ("m/N", "force-sensor spring compliance; strength = 1 / k_sensor", 1.0 / 20000.0),
-    # lead-screw stage with a stepper: a few um to tens of um on reversal; 10 um is the middle of that span
-    "stage_backlash": ("m", "dead band of the stage on reversal", 10e-6),
-    "sensor_drift": ("N/sqrt(s)", "force-sensor baseline random walk", 2e-5),
+
+@dataclass(frozen=True)
+class EffectSpec:
+    unit: str
+    meaning: str
+    realistic: float
+    low: float                      # allowed strength range
+    high: float
+    kind: str                       # "library" (a candidate family exists), "decoy", "bench" (model parameter)
+    shape: tuple[str, ...] = ()     # shape parameter names (defaults in the module that implements the form)
+
+
+EFFECTS: dict[str, EffectSpec] = {
+    "hysteresis": EffectSpec(
+        "fraction of span", "Preisach hysteresis per plate; largest rise/fall gap of the net drive at 250 V / span",
+        0.12, 0.0, 0.4, "library", ("r0", "kappa")),
+    "creep": EffectSpec(
+        "per decade", "Kelvin-Voigt (Prony) creep per plate; mean growth per decade of time, 10 ms - 100 s",
+        0.015, 0.0, 0.05, "library", ("tau1_s", "weight1", "tau2_s", "weight2", "tau3_s", "weight3", "tau4_s",
+                                       "weight4")),
+    "field_dependent_d31": EffectSpec(
+        "ratio - 1", "d31 vs field (monotone knots or logistic); d31 at 250 V / d31 at 100 V - 1 (either sign)",
+        0.5, -0.6, 1.5, "library", ("form", "switch_field_V_per_um", "width_V_per_um", "split", "low_tail",
+                                    "high_tail")),
+    "base_compliance": EffectSpec(
+        "fraction", "nonlinear clamp (hardening or push/pull) in series; bare-actuator blocked-force loss at 250 V",
+        0.2, 0.0, 0.8, "library", ("form", "hardening", "pull_ratio")),
+    "grounding_lengthening": EffectSpec(
+        "fraction", "clamp line moved back: active length x (1 + s), taper and extension ratio follow", 0.08,
+        0.0, 0.3, "library"),
+    "sensor_compliance": EffectSpec(
+        "m/N", "the sensor mount's compliance, in series with the sensor in the contact (dynamics included)",
+        1.0 / 20000.0, 0.0, 5e-3, "library"),
+    "width_loss": EffectSpec(
+        "fraction", "laser-cut width loss: every width x (1 - s)", 0.15, 0.0, 0.5, "library"),
+    "pzt_thickness": EffectSpec(
+        "fraction", "PZT plates thicker than nominal: t_p x (1 + s)", 0.2, -0.3, 0.5, "library"),
+    "pzt_modulus": EffectSpec(
+        "fraction", "PZT modulus off: E_p x (1 + s)", -0.19, -0.5, 0.5, "library"),
+    "bias_error": EffectSpec(
+        "m", "transmission bias off and relaxing (Kapton viscoelasticity); mean offset over the first 300 s",
+        -30e-6, -150e-6, 150e-6, "library", ("run_fraction", "tau1_s", "tau2_s", "weight1")),
+    "stage_backlash": EffectSpec(
+        "m", "stage play (full width) with a compliant stick-slip drive behind it", 10e-6, 0.0, 100e-6, "library",
+        ("lag_m", "stick_ratio")),
+    "sensor_drift": EffectSpec(
+        "N/sqrt(s)", "force-sensor baseline: thermal warm-up + Ornstein-Uhlenbeck wander of this rate", 2e-5, 0.0,
+        1e-3, "library", ("warmup_N", "warmup_tau_s", "reversion_s")),
+    "foot_friction": EffectSpec(
+        "coefficient", "Coulomb friction of the foot on the sensor (leg fixture)", 0.25, 0.0, 1.0, "bench"),
     # decoys for the gap diagnosis's self-check: physical effects OUTSIDE its candidate library
-    "amplifier_gain_error": ("fraction", "HV amplifier gain below nominal: every plate sees (1 - s) x V", 0.08),
-    "flexure_softening": ("fraction", "warm Kapton: every flexure stiffness kappa_i scaled by (1 - s)", 0.3),
+    "amplifier_gain_error": EffectSpec(
+        "fraction", "the HV reaching both plates is (1 - s) of the amplifier output (its monitor reads full)", 0.08,
+        0.0, 0.5, "decoy"),
+    "flexure_softening": EffectSpec(
+        "fraction", "warm Kapton: every flexure stiffness kappa_i x (1 - s)", 0.3, 0.0, 0.9, "decoy"),
+    "mount_thermal_drift": EffectSpec(
+        "m/s", "the sensor's mount creeps toward the plant (thermal expansion of the positioner)", 1e-9, 0.0,
+        1e-7, "decoy"),
 }
-REALISTIC: dict[str, float] = {name: spec[2] for name, spec in EFFECTS.items()}
+REALISTIC: dict[str, float] = {name: spec.realistic for name, spec in EFFECTS.items()}
+DECOYS = tuple(n for n, s in EFFECTS.items() if s.kind == "decoy")
 
 
 def check_effects(effects: dict[str, float], where: str = "effects") -> dict[str, float]:
+    """The effects that are on (strength != 0), each checked against its range; a bad one is one ConfigError line."""
     for name, strength in effects.items():
         if name not in EFFECTS:
             raise ConfigError(f"{where}: unknown effect {name!r} (known: {', '.join(EFFECTS)})")
-        if not math.isfinite(strength):
-            raise ConfigError(f"{where}: strength of {name} must be finite, got {strength!r}")
-        if name not in ("bias_error",) and strength < 0:
-            raise ConfigError(f"{where}: strength of {name} must be >= 0, got {strength!r}")
+        if not isinstance(strength, (int, float)) or not math.isfinite(strength):
+            raise ConfigError(f"{where}: strength of {name} must be a finite number, got {strength!r}")
+        spec = EFFECTS[name]
+        if not spec.low <= strength <= spec.high:
+            raise ConfigError(f"{where}: strength of {name} must be in [{spec.low:g}, {spec.high:g}] "
+                              f"({spec.unit}), got {strength!r}")
     return {k: float(v) for k, v in effects.items() if v != 0}
 
 
-# ------------------------------------------------------------------ model-hook effects (generator forms)
+def check_shapes(shapes: dict[str, dict[str, float]], where: str = "effect_shapes") -> dict[str, dict[str, float]]:
+    out: dict[str, dict[str, float]] = {}
+    for name, params in shapes.items():
+        if name not in EFFECTS:
+            raise ConfigError(f"{where}: unknown effect {name!r} (known: {', '.join(EFFECTS)})")
+        if not isinstance(params, dict):
+            raise ConfigError(f"{where}.{name}: expected a table of shape parameters, got {params!r}")
+        known = EFFECTS[name].shape
+        for key, value in params.items():
+            if key not in known:
+                raise ConfigError(f"{where}.{name}: unknown shape parameter {key!r} "
+                                  f"(known: {', '.join(known) or 'none'})")
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{where}.{name}.{key}: expected a finite number, got {value!r}")
+        out[name] = {k: float(v) for k, v in params.items()}
+    return out
+
+
+def describe() -> str:
+    """The effect table: name, unit of strength, realistic value, kind, meaning, shape parameters."""
+    lines = [f"{'effect':24s} {'unit':18s} {'realistic':>10s}  {'kind':8s} meaning [shape parameters]"]
+    for name, s in EFFECTS.items():
+        shape = f" [{', '.join(s.shape)}]" if s.shape else ""
+        lines.append(f"{name:24s} {s.unit:18s} {s.realistic:10.3g}  {s.kind:8s} {s.meaning}{shape}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ model-parameter effects (generator forms)
 @dataclass(frozen=True)
-class TanhFieldD31(Effect):
-    """d31 rising with field as a saturating law: g(V) = V (1 + s tanh^2(E / E_ref)) per plate, E_ref = 1.4 V/um,
-    normalised so the gain at 2 V/um is s."""
-
-    name: str = "field_dependent_d31"
-
-    def plate_voltage(self, v_plate_V, actuator):
-        v = np.asarray(v_plate_V, dtype=float)
-        field = np.abs(v) / actuator.pzt_thickness_m / 1.4e6
-        return v * (1.0 + self.strength * np.tanh(field) ** 2 / math.tanh(2.0 / 1.4) ** 2)
-
-
-@dataclass(frozen=True)
-class RotationalBaseCompliance(Effect):
-    """A rotational spring at the clamp: the tip gains the clamp rotation x length, so blocked force drops by the
-    fraction `strength` while the free displacement is kept (a series spring k_act (1 - s) / s)."""
-
-    name: str = "base_compliance"
-
-    def serial_stiffness(self, k_ser_N_per_m, actuator):
-        s = min(self.strength, 0.95)
-        k_base = act.stiffness_N_per_m(actuator) * (1.0 - s) / s
-        return 1.0 / (1.0 / k_ser_N_per_m + 1.0 / k_base)
-
-
-@dataclass(frozen=True)
-class WidthLoss(Effect):
-    """Laser-cut edge loss: the effective width is (1 - strength) of the nominal."""
+class UniformWidthLoss(Effect):
+    """Laser-cut width loss as a uniform scaling: every width along the plate x (1 - s) (taper ratio kept)."""
 
     name: str = "width_loss"
 
     def actuator_params(self, params):
-        return act.with_changes(params, width_nom_m=params.width_nom_m * (1.0 - min(self.strength, 0.9)))
+        return act.with_changes(params, width_nom_m=params.width_nom_m * (1.0 - self.strength))
 
 
 @dataclass(frozen=True)
-class BiasError(Effect):
-    """The transmission's actual bias differs from its designed value by `strength` metres."""
+class PlateThickness(Effect):
+    name: str = "pzt_thickness"
 
-    name: str = "bias_error"
-
-    def design_params(self, design):
-        import dataclasses
-
-        return dataclasses.replace(design, bias_m=design.bias_m + self.strength)
+    def actuator_params(self, params):
+        return act.with_changes(params, pzt_thickness_m=params.pzt_thickness_m * (1.0 + self.strength))
 
 
 @dataclass(frozen=True)
-class AmplifierGainError(Effect):
-    """Decoy: both HV channels deliver (1 - strength) of the commanded voltage (per-plate voltage scaled)."""
+class PlateModulus(Effect):
+    name: str = "pzt_modulus"
 
-    name: str = "amplifier_gain_error"
+    def actuator_params(self, params):
+        return act.with_changes(params, pzt_modulus_Pa=params.pzt_modulus_Pa * (1.0 + self.strength))
 
-    def plate_voltage(self, v_plate_V, actuator):
-        return np.asarray(v_plate_V, dtype=float) * (1.0 - min(self.strength, 0.9))
+
+@dataclass(frozen=True)
+class ClampLineMoved(Effect):
+    """Imperfect grounding: the clamp line sits s x l further toward the base, so the bending length is l (1 + s).
+    The rigid extension keeps its length (l_r = l_ext / l' falls) and the taper continues into the newly free
+    part: the base width grows by s l times the taper's slope, so the mean width and the width ratio change."""
+
+    name: str = "grounding_lengthening"
+
+    def actuator_params(self, params):
+        s = self.strength
+        w_base = params.width_ratio * params.width_nom_m
+        w_tip = (2.0 - params.width_ratio) * params.width_nom_m
+        slope = (w_base - w_tip) / params.length_m          # width gained per metre toward the base
+        length = params.length_m * (1.0 + s)
+        new_base = w_base + slope * s * params.length_m
+        mean = 0.5 * (new_base + w_tip)
+        return act.with_changes(params, length_m=length, width_nom_m=mean, width_ratio=new_base / mean,
+                                length_ratio=params.length_ratio / (1.0 + s))
 
 
 @dataclass(frozen=True)
 class FlexureSoftening(Effect):
-    """Decoy: every flexure joint softer by the fraction `strength` (Kapton modulus falls with temperature)."""
+    """Decoy: every flexure joint softer by the fraction `strength` (Kapton's modulus falls with temperature)."""
 
     name: str = "flexure_softening"
 
     def design_params(self, design):
-        import dataclasses
-
-        k = tuple(float(x) * (1.0 - min(self.strength, 0.9)) for x in design.kappa_N_m_per_rad)
+        k = tuple(float(x) * (1.0 - self.strength) for x in design.kappa_N_m_per_rad)
         return dataclasses.replace(design, kappa_N_m_per_rad=k)
 
 
+MODEL_HOOKS = {"width_loss": UniformWidthLoss, "pzt_thickness": PlateThickness, "pzt_modulus": PlateModulus,
+               "grounding_lengthening": ClampLineMoved, "flexure_softening": FlexureSoftening}
+
+
 def model_effects(effects: dict[str, float]) -> list[Effect]:
-    makers = {"field_dependent_d31": TanhFieldD31, "base_compliance": RotationalBaseCompliance,
-              "width_loss": WidthLoss, "bias_error": BiasError,
-              "amplifier_gain_error": AmplifierGainError, "flexure_softening": FlexureSoftening}
-    return [makers[name](strength=s) for name, s in effects.items() if name in makers and s != 0]
-
-
-# ------------------------------------------------------------------ drive memory (hysteresis, creep)
-class DriveMemory:
-    """Effective (V_bias, V_drive) as a function of time, from the commanded amplifier outputs through the memory
-    effects. Integrated on a fixed grid (`dt_s`) as far as the latest time asked; earlier times interpolate the
-    stored history, so emulators may ask in any order within `keep_s`."""
-
-    CREEP_TAUS_S = (0.03, 0.3, 3.0, 30.0)
-
-    def __init__(self, voltages_at, hysteresis: float, creep: float, full_scale_V: float = 250.0,
-                 dt_s: float = 5e-4, keep_s: float = 30.0) -> None:
-        self._voltages_at = voltages_at  # times array -> (v_bias array, v_drive array)
-        self.hysteresis = float(hysteresis)
-        self.creep = float(creep)
-        self.full_scale_V = full_scale_V
-        self.dt_s = dt_s
-        self.keep = int(keep_s / dt_s)
-        self._t0 = None
-        self._times = np.empty(0)
-        self._vb = np.empty(0)
-        self._vd = np.empty(0)
-        # Bouc-Wen state h (in units of full scale) and creep lag states (volts)
-        self._h = 0.0
-        self._s_prev = None
-        self._lags = np.zeros(len(self.CREEP_TAUS_S))
-
-    @property
-    def active(self) -> bool:
-        return self.hysteresis > 0 or self.creep > 0
-
-    def many(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if np.size(times_s) == 0:  # an empty query (a DAQ validating its channels): nothing to look up
-            empty = np.empty(np.shape(times_s))
-            return empty, empty.copy()
-        if not self.active:
-            return self._voltages_at(times_s)
-        self._extend_to(float(np.max(times_s)))
-        return np.interp(times_s, self._times, self._vb), np.interp(times_s, self._times, self._vd)
-
-    def _extend_to(self, time_s: float) -> None:
-        if self._t0 is None:
-            self._t0 = time_s
-            self._times = np.array([time_s])
-            vb, vd = self._voltages_at(self._times)
-            self._s_prev = float(2 * vd[0] - vb[0])
-            self._lags[:] = self._s_prev
-            self._vb, self._vd = vb.astype(float), vd.astype(float)
-            return
-        last = self._times[-1]
-        if time_s <= last:
-            return
-        n = int(math.ceil((time_s - last) / self.dt_s))
-        times = last + self.dt_s * np.arange(1, n + 1)
-        vb, vd = self._voltages_at(times)
-        s = 2 * np.asarray(vd, float) - np.asarray(vb, float)
-        s_eff = self._integrate(s)
-        vd_eff = (s_eff + vb) / 2.0
-        self._times = np.concatenate([self._times, times])[-self.keep:]
-        self._vb = np.concatenate([self._vb, vb])[-self.keep:]
-        self._vd = np.concatenate([self._vd, vd_eff])[-self.keep:]
-
-    def _integrate(self, s: np.ndarray) -> np.ndarray:
-        """Bouc-Wen hysteresis, then Prony-series creep, sample by sample on the grid.
-
-        Hysteresis: x = s / full scale; h obeys dh = dx - beta |dx| h - gamma dx |h| with beta = gamma = 1 / (2 w),
-        so h saturates at +w on rising input and -w on falling input; the effective drive is x - h (it lags the
-        command by up to w = strength on each side).
-        Creep: each lag state follows the effective drive with its time constant (one per decade); the output is
-        y - g sum_k (y - lag_k), so after a step the response starts low by g per decade and creeps up to the
-        static value by g per decade of time."""
-        out = np.empty_like(s)
-        fs = self.full_scale_V
-        w = self.hysteresis
-        k = 1.0 / (2.0 * w) if w > 0 else 0.0
-        h, prev = self._h, self._s_prev
-        alphas = self.dt_s / (np.asarray(self.CREEP_TAUS_S) + self.dt_s)
-        lags = self._lags
-        g = self.creep
-        for i, si in enumerate(s):
-            y = si
-            if w > 0:
-                dx = (si - prev) / fs
-                h += dx - k * abs(dx) * h - k * dx * abs(h)
-                y = si - h * fs
-            if g > 0:
-                lags += alphas * (y - lags)
-                y = y - g * float(np.sum(y - lags))
-            out[i] = y
-            prev = si
-        self._h, self._s_prev = h, prev
-        return out
+    """The model-parameter effects that are on, as `hamr_bench.model` effects (applied to the specimen's
+    parameters when the bench builds its powertrain)."""
+    return [MODEL_HOOKS[name](strength=s) for name, s in effects.items() if name in MODEL_HOOKS and s != 0]

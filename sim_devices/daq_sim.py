@@ -208,6 +208,13 @@ class SimDaq:
         self._faults = FaultInjector(DAQ_FAULTS, "sim DAQ", clock)
         self._stream: tuple[tuple[str, ...], float, float] | None = None  # channels, rate, next sample time
         self.ao_write_count = 0
+        # Called with the time from which an amplifier's output changes (a write, a trip): the simulated bench
+        # recomputes its physics from there.
+        self.output_listeners: list[Callable[[float], None]] = []
+
+    def _outputs_change(self, time_s: float) -> None:
+        for listener in self.output_listeners:
+            listener(time_s)
 
     # ---- fault injection -----------------------------------------------------------------------------------
     def inject_fault(self, name: str, channel: str | None = None, at_s: float | None = None) -> None:
@@ -219,11 +226,13 @@ class SimDaq:
             for ch_name, ch in self._ao.items():
                 if ch.amp is not None and channel in (None, ch_name):
                     ch.tripped_at_s = at if ch.tripped_at_s is None else min(ch.tripped_at_s, at)
+            self._outputs_change(at)
 
     def clear_fault(self, name: str) -> None:
         if name == "amp_trip":
             for ch in self._ao.values():
                 ch.tripped_at_s = None
+            self._outputs_change(self._clock.now_s())
         self._faults.clear(name)
 
     def _active(self, name: str) -> bool:
@@ -259,6 +268,7 @@ class SimDaq:
         del ch.segments[cut:], ch.starts_s[cut:]
         ch.segments.append(_Segment(t0_s, dt_s, daq_V, target, y))
         ch.starts_s.append(t0_s)
+        self._outputs_change(t0_s)
         horizon = t0_s - self._history_s
         drop = bisect.bisect_left(ch.starts_s, horizon) - 1  # keep the segment in force at the horizon
         if drop > 0:

@@ -9,12 +9,13 @@ has the amplifier gain and monitor scale of `[amplifier]` and the camera optics 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from hamr_bench.backends import BenchOptions
 from hamr_bench.config import load_table, setting
 from hamr_bench.rig_file import RigFile
 from sim_devices.bench import BenchSettings, SimBench, parse_fault
-from sim_devices.bench_effects import check_effects
+from sim_devices.bench_effects import check_effects, check_shapes
 
 _DEFAULTS = BenchSettings()
 
@@ -28,6 +29,10 @@ class SimTable:
     seed: int = _DEFAULTS.seed
     params: str = setting(_DEFAULTS.params_set, choices=("reported", "effective"))
     effects: dict[str, float] = field(default_factory=dict)
+    effect_shapes: dict[str, dict[str, float]] = field(default_factory=dict)
+    specimen_seed: int = setting(-1, lo=-1)  # -1: the specimen is the nominal one
+    dynamics: bool = _DEFAULTS.dynamics
+    model: dict[str, dict[str, Any]] = field(default_factory=dict)
     touch_stage_m: float = _DEFAULTS.touch_stage_m
     stage_travel_m: tuple[float, float] = _DEFAULTS.stage_limits_m
     stage_velocity_m_per_s: float = setting(_DEFAULTS.stage_velocity_m_per_s, positive=True)
@@ -49,6 +54,9 @@ def make_bench(rig_file: RigFile, options: BenchOptions) -> SimBench:
         layers=options.layers if options.layers is not None else sim.layers,
         params_set=sim.params,
         effects={**file_effects, **options.effects},
+        effect_shapes=check_shapes(sim.effect_shapes, place.key("effect_shapes")),
+        specimen_seed=None if sim.specimen_seed < 0 else sim.specimen_seed,
+        dynamics=sim.dynamics,
         seed=options.seed if options.seed is not None else sim.seed,
         touch_stage_m=sim.touch_stage_m,
         stage_limits_m=sim.stage_travel_m,
@@ -62,6 +70,6 @@ def make_bench(rig_file: RigFile, options: BenchOptions) -> SimBench:
         metres_per_pixel=camera.metres_per_pixel if camera else _DEFAULTS.metres_per_pixel,
         noise=sim.noise,
         faults=tuple(parse_fault(f) for f in options.faults),
-        model_overrides={k: dict(v) for k, v in options.model_overrides.items()},
+        model_overrides={**sim.model, **{k: dict(v) for k, v in options.model_overrides.items()}},
     )
     return SimBench(settings)

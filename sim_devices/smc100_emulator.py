@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from hamr_bench.clock import Clock
@@ -152,6 +152,13 @@ class Smc100Emulator:
         t0 = clock.now_s()
         x0 = p.initial_position_m
         self._history: list[Motion] = [Motion(t0, x0, x0, [], x0, self._half_play_m, "hold")]
+        # Called with the time from which the stage's motion changes (a command, a fault, a timeout): the simulated
+        # bench recomputes its physics from there.
+        self.motion_listeners: list[Callable[[float], None]] = []
+
+    def _motion_changes(self, time_s: float) -> None:
+        for listener in self.motion_listeners:
+            listener(time_s)
 
     # -- settings the rest of the code reads often
     # -----------------------------------------------------------------
@@ -194,6 +201,7 @@ class Smc100Emulator:
             deadline_s = motion.t0 + self.settings.home_timeout_s
             if motion.t_end > deadline_s and time_s >= deadline_s:
                 self._history[-1] = motion.truncated(deadline_s)
+                self._motion_changes(deadline_s)
                 self.state_code = NOT_REFERENCED_FROM_HOMING
                 self.error_bits |= 1 << ref.BIT_HOMING_TIME_OUT
                 return
@@ -216,6 +224,7 @@ class Smc100Emulator:
         direction = motion.velocity_at(t)
         if name == "following_error":
             self._history[-1] = motion.truncated(t)
+            self._motion_changes(t)
             self.error_bits |= 1 << ref.BIT_FOLLOWING_ERROR
             if in_motion:
                 self.state_code = DISABLE_FROM_MOVING
@@ -236,6 +245,7 @@ class Smc100Emulator:
                 self._home_fails_at_end = True
             elif family in ("MOVING", "READY", "DISABLE"):
                 self._history[-1] = motion.truncated(t)
+                self._motion_changes(t)
                 self.state_code = ref.NOT_REFERENCED_FROM[family]
 
     def is_silent(self, time_s: float) -> bool:
@@ -334,6 +344,7 @@ class Smc100Emulator:
             end = segments[-1].t0 + segments[-1].dur if segments else t
             segments.append(Segment(end, x1, 0.0, 0.0, settle_s))
         self._history.append(Motion(t, x0, x1, segments, mech0, self._half_play_m, kind))
+        self._motion_changes(t)
 
     def home(self, t: float) -> str | None:
         """OR: search home as the HOME type (HT) says. 0 and 2: the home switch (mechanical 0; 0 adds the
@@ -389,6 +400,7 @@ class Smc100Emulator:
         motion = self._motion
         x, v = motion.motor_at(t), motion.velocity_at(t)
         self._history[-1] = motion.truncated(t)
+        self._motion_changes(t)
         a = self.acceleration_m_per_s2
         kind = "stop_homing" if self.family == "HOMING" else "stop"
         if v != 0:
@@ -407,6 +419,7 @@ class Smc100Emulator:
             return letter
         motion = self._motion
         self._history[-1] = motion.truncated(t)
+        self._motion_changes(t)
         self._counter_offset_m = self._motion.x_end
         self.error_bits = 0
         self.error_letter = "@"

@@ -1,298 +1,430 @@
-"""The weighted least-squares problem every part of the diagnosis shares: observed rows, their noise (pure error),
-the nominal model plus candidate strengths, and the nuisances (per-run zero offset, per-sensor timing lag, and the
-drift slopes when the drift candidate is in) solved linearly for any strengths (variable projection).
+"""The joint fit every stage of the diagnosis stands on: observed phase rows with their pure-error noise, the
+nominal model with each SPECIMEN's gains under the tolerance prior (a random effect, `tolerances.py`), each
+SESSION's contact shift, each sensor chain's lag, and any set of candidate effects (strength and shape
+parameters, shapes under weak priors), solved as one bounded nonlinear least-squares problem.
 
-Residuals are in noise units (z = (y - model) / sigma), so rows of force and displacement sit in one sum."""
+The objective is the sum of squared residuals in noise units, z = (measured - model) / standard error, plus the
+prior rows (specimen gains whitened by their tolerance covariance, shapes, the drift spline's smoothness). Every
+nuisance is re-fitted with every set of effects: a specimen that is a few % off the presets is absorbed by its
+gains at little cost, a shift far beyond the tolerances is not, which is what lets an effect show.
+
+Parameters touch few rows (a specimen's gains its own runs, a session's shift its own runs), so the Jacobian is
+sparse; `scipy.optimize.least_squares` groups the finite differences by that sparsity and each run caches its
+last predictions, so a column costs the runs it touches."""
 
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
 
+from analysis.gap import tolerances as tol
+from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance
+from analysis.gap.families import FAMILIES
 from analysis.gap.features import GapData
-from hamr_bench.errors import HamrBenchError
-from analysis.gap.library import RunEngine
 
-OFFSET_STEP = {"leg": 2e-6, "actuator": 1e-3}   # m (h0) and N (f0): finite-difference steps for the columns
-LAG_BOUNDS_S = (0.0, 0.06)
-LAG_STEP_S = 2e-3
-# contact shift search range: actuator, 2 coarse steps of the trial's search plus the largest play; leg, the
-# default search's threshold over the softest leg at zero sag (0.4 mN at ~2 N/m) with margin
+LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
+GAIN_BOUND = 1.0          # |log gain| (a factor e): far beyond any tolerance, a bound for the solver only
+NAN_RESIDUAL = 1e3        # a row the model cannot evaluate (beyond the linkage's reach)
+DRIFT_RIDGE_N = 2e-3      # prior scale of the baseline coefficients (N): a sensor baseline wanders by mN, not by the
+#                           blocked force; without it near-collinear spline and warm-up columns trade large opposite
+#                           coefficients for phase-dependent offsets
 
 
-def offset_rows(e: RunEngine, undriven_only: bool = False) -> np.ndarray:
-    """The rows a run's zero offset (contact shift and its linear column) is identified from: its force rows; with
-    `undriven_only`, when the run has an undriven stiffness sweep (two or more pushes), those holds alone.
+@dataclass(frozen=True)
+class Param:
+    kind: str           # strength | shape | gain | shift | lag | drift | drift_tau
+    key: tuple
+    lo: float
+    hi: float
+    scale: float
+    start: float
 
-    Attribution uses all force rows: the offset and the effects that act on the sweep (a sensor spring scales its
-    forces, a play shifts its loading branch) are then not identified from the same eight holds (from the holds
-    alone, sensor-compliance strengths came out 4-10 % low and small plays were missed; docs/gap.md, fifth run).
-    The residual map (`where`) uses the holds alone: no drive effect acts on them, and fitted over the driven rows
-    too, a drive effect's misfit of the blocked force moves the contact (~7-11 um with hysteresis 0.12) and paints
-    its gap on the sweep, where data and model agree."""
-    force = e.is_force_row
-    if not undriven_only:
-        return force
-    holds = force & np.array([r.mode == "stiffness" for r in e.rows], dtype=bool)
-    if np.unique([r.sag_m for r, h in zip(e.rows, holds) if h]).size >= 2:
-        return holds
-    return force
+
+@dataclass
+class Layout:
+    """The parameter vector of one set of effects: names -> positions, bounds, the Jacobian's sparsity."""
+
+    names: tuple[str, ...]
+    params: list[Param]
+    index: dict[tuple, int]
+    n_rows: int
+    n_prior: int
+    sparsity: object = None
+
+    def vector(self, values: dict[tuple, float] | None = None) -> np.ndarray:
+        values = values or {}
+        x = np.array([values.get((p.kind,) + p.key, p.start) for p in self.params], float)
+        lo, hi = self.bounds()
+        return np.clip(x, lo, hi)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return (np.array([p.lo for p in self.params]), np.array([p.hi for p in self.params]))
+
+    def values(self, x: np.ndarray) -> dict[tuple, float]:
+        return {(p.kind,) + p.key: float(v) for p, v in zip(self.params, x, strict=True)}
+
+
+@dataclass
+class Fit:
+    """A solved set of effects: its parameters, objective, the Jacobian at the optimum (rows + prior rows)."""
+
+    names: tuple[str, ...]
+    layout: Layout
+    x: np.ndarray
+    residual: np.ndarray          # z rows then prior rows
+    jac: np.ndarray
+    effects: Effects
+    drift_strength: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def objective(self) -> float:
+        return float(self.residual @ self.residual)
+
+    @property
+    def z(self) -> np.ndarray:
+        return self.residual[:self.layout.n_rows]
+
+    @property
+    def chi2_rows(self) -> float:
+        z = self.z
+        return float(z @ z)
+
+    def value(self, kind: str, *key: object) -> float:
+        return float(self.x[self.layout.index[(kind,) + tuple(key)]])
+
+    def values(self) -> dict[tuple, float]:
+        return self.layout.values(self.x)
 
 
 class Problem:
-    def __init__(self, data: GapData, fit_params: dict | None = None, offsets_from_undriven: bool = False) -> None:
+    def __init__(self, data: GapData, fit_params: dict | None = None) -> None:
         self.data = data
-        self.offsets_from_undriven = offsets_from_undriven  # see `offset_rows`: the residual map's view
         self.engines = [RunEngine(run, fit_params) for run in data.runs]
         self.rows = data.rows
         self.y = np.array([r.value for r in self.rows])
+        self.run_of = np.array([r.run for r in self.rows])
+        self.sigma = self._noise()
+        self.slices: list[slice] = []
+        start = 0
+        for e in self.engines:
+            self.slices.append(slice(start, start + e.n_rows))
+            start += e.n_rows
+        self.pure_dof = int(sum(max(r.n - 1, 0) for r in self.rows))
+        self.groups = sorted({self.group_of(e) for e in self.engines})
+        self.sessions = sorted({self.session_of(e) for e in self.engines if e.has_contact()})
+        self.chains = sorted({self.chain_of(e, q) for e in self.engines for q in self._quantities(e)})
+        self._whiten = {g: tol.whitening(next(e.actuator for e in self.engines if self.group_of(e) == g))
+                        for g in self.groups}
+        self._cache: list[dict] = [{} for _ in self.engines]
+        self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
+        self.ramp_rates = self._ramp_rates()
+
+    # --- structure -----------------------------------------------------------------------------------------
+    def _noise(self) -> np.ndarray:
+        """Pure-error standard errors; a row without one gets its run's median (never zero)."""
         # pure error, and where the drive was inferred from a measured monitor, the model's own error from it
         se = np.array([math.hypot(r.se, getattr(r, "drive_se", 0.0)) if np.isfinite(r.se) else r.se
                        for r in self.rows], float)
-        self.run_of = np.array([r.run for r in self.rows])
-        # rows with no pure-error estimate get their run's median (never zero: a floor of 1e-9 of the scale)
         for k in np.unique(self.run_of):
             m = self.run_of == k
             good = se[m][np.isfinite(se[m]) & (se[m] > 0)]
             fill = float(np.median(good)) if good.size else float(np.nanmax(np.abs(self.y[m])) * 1e-3 + 1e-12)
             se[m] = np.where(np.isfinite(se[m]) & (se[m] > 0), se[m], fill)
-        self.sigma = se
-        self.slices = []
-        start = 0
+        return se
+
+    @staticmethod
+    def group_of(e: RunEngine) -> str:
+        """Specimen key of the gains: the actuator's layer count and the specimen label (a leg run shares its
+        actuator's gains with the bare-actuator runs of the same label and layers)."""
+        return f"layers={e.run.layers}|specimen={getattr(e.run, 'specimen', '')}"
+
+    @staticmethod
+    def session_of(e: RunEngine) -> str:
+        return getattr(e.run, "session", "") or e.run.path
+
+    @staticmethod
+    def chain_of(e: RunEngine, quantity: str) -> tuple[str, str, str]:
+        source = (getattr(e.run, "timelines", {}) or {}).get("drive", "commanded")
+        return (e.run.fixture, quantity, "inferred" if source == "inferred" else "commanded")
+
+    @staticmethod
+    def _quantities(e: RunEngine) -> list[str]:
+        return sorted({r.quantity for r in e.rows})
+
+    def _ramp_rates(self) -> list[float]:
+        """Distinct ramp durations of the driven steps (s, rounded to 10 %): one rate cannot tell a timing lag
+        from rate-independent hysteresis."""
+        out: list[float] = []
         for e in self.engines:
-            self.slices.append(slice(start, start + e.n_rows))
-            start += e.n_rows
-        self.lag: dict[tuple[str, str], float] = {}
-        self.contact_shift: dict[int, float] = {}
-        self._pinv_cache: dict = {}
-        self.pure_dof = int(sum(max(r.n - 1, 0) for r in self.rows))
-        # The contact shifts and the sensor lags each move the other's best value: fitted in turn, shift last.
-        self._fit_contact_shifts()
-        self._fit_lags()
-        self._fit_contact_shifts()
-        self._offset_cols = self._offset_columns()
-        self._drift_cols = self._drift_columns()
+            for timing in (getattr(e.run, "step_timing", {}) or {}).values():
+                r = float(getattr(timing, "ramp_up_s", 0.0) or 0.0)
+                if r > 0 and not any(abs(r - x) <= 0.1 * x for x in out):
+                    out.append(r)
+        return sorted(out)
 
-    # --- model -------------------------------------------------------------------------------------------
-    def _run_lag(self, e: RunEngine) -> dict[str, float]:
-        fx = e.run.fixture
-        return {q: self.lag.get((fx, q), 0.0) for q in ("force_N", "displacement_m")}
+    # --- layout ----------------------------------------------------------------------------------------------
+    def layout(self, names: tuple[str, ...] | list[str]) -> Layout:
+        names = tuple(names)
+        params: list[Param] = []
+        for n in names:
+            f = FAMILIES[n]
+            if f.kind != "baseline":
+                lo, hi = f.bounds
+                params.append(Param("strength", (n,), lo, hi, f.scale, min(max(0.0, lo), hi)))
+            for s_name, shape in f.shapes.items():
+                params.append(Param("shape", (n, s_name), shape.lo, shape.hi, max(shape.prior_sd, 1e-3),
+                                    shape.default))
+        params += self._nuisance_params()
+        if "sensor_drift" in names:
+            for k in range(len(self.engines)):
+                for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default
+                                                  ).shape[1]):
+                    params.append(Param("drift", (k, j), -1.0, 1.0, 1e-3, 0.0))
+        index = {(p.kind,) + p.key: i for i, p in enumerate(params)}
+        n_prior = self._n_prior(names, params)
+        lay = Layout(names, params, index, self.y.size, n_prior)
+        lay.sparsity = self._sparsity(lay)
+        return lay
 
-    def model(self, strengths: dict[str, float]) -> np.ndarray:
-        out = np.empty(self.y.size)
-        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
-            out[sl] = e.predict(strengths, self._run_lag(e), shift_m=self.contact_shift.get(k, 0.0))
+    def _nuisance_params(self) -> list[Param]:
+        """What every model carries whatever effects it names: per specimen group its two log gains, per session
+        its contact shift, per sensor chain its lag."""
+        params = [Param("gain", (g, j), -GAIN_BOUND, GAIN_BOUND, 0.05, 0.0) for g in self.groups for j in (0, 1)]
+        for s in self.sessions:
+            fixture = next(e.run.fixture for e in self.engines if self.session_of(e) == s)
+            b = SHIFT_BOUND_M[fixture]
+            params.append(Param("shift", (s,), -b, b, b / 10, 0.0))
+        for c in self.chains:
+            lo, hi = LAG_BOUNDS_S[c[2]]
+            params.append(Param("lag", c, lo, hi, 5e-3, 0.0))
+        return params
+
+    def _n_prior(self, names: tuple[str, ...], params: list[Param]) -> int:
+        n = 2 * len(self.groups) + sum(1 for p in params if p.kind == "shape")
+        n += sum(self._smooth_rows(k) for k in range(len(self.engines))) if "sensor_drift" in names else 0
+        n += sum(1 for p in params if p.kind == "drift")
+        return n
+
+    def _runs_where(self, pred) -> np.ndarray:
+        m = np.zeros(self.y.size, bool)
+        for k, e in enumerate(self.engines):
+            if pred(e):
+                m[self.slices[k]] = True
+        return m
+
+    def _sparsity(self, lay: Layout) -> object:
+        n_res = lay.n_rows + lay.n_prior
+        s = lil_matrix((n_res, len(lay.params)), dtype=int)
+        prior_of = self._prior_rows(lay)
+        everything = np.ones(self.y.size, bool)
+        force_rows = np.array([r.quantity == "force_N" for r in self.rows])
+        for i, p in enumerate(lay.params):
+            if p.kind in ("strength", "shape"):
+                rows = force_rows if p.key[0] == "sensor_drift" else everything
+            elif p.kind == "gain":
+                rows = self._runs_where(lambda e, g=p.key[0]: self.group_of(e) == g)
+            elif p.kind == "shift":
+                rows = self._runs_where(lambda e, s_=p.key[0]: e.has_contact() and self.session_of(e) == s_)
+            elif p.kind == "lag":
+                rows = np.array([self.chain_of(self.engines[r.run], r.quantity) == p.key for r in self.rows])
+            else:   # drift coefficient of run k
+                rows = np.zeros(self.y.size, bool)
+                rows[self.slices[p.key[0]]] = True
+            for row in np.flatnonzero(rows).tolist():
+                s[row, i] = 1
+            for j in prior_of.get(i, []):
+                s[lay.n_rows + j, i] = 1
+        return s.tocsr()
+
+    def _prior_rows(self, lay: Layout) -> dict[int, list[int]]:
+        """Parameter index -> the prior rows it enters (offsets after the data rows), in `_prior` order."""
+        out: dict[int, list[int]] = {}
+        j = 0
+        for g in self.groups:
+            for comp in (0, 1):
+                out.setdefault(lay.index[("gain", g, comp)], []).extend([j, j + 1])
+            j += 2
+        for i, p in enumerate(lay.params):
+            if p.kind == "shape":
+                out.setdefault(i, []).append(j)
+                j += 1
+        if "sensor_drift" in lay.names:
+            self._drift_prior_rows(lay, out, j)
         return out
 
-    def _fit_contact_shifts(self, strengths: dict[str, float] | None = None) -> None:
-        """Per run with a contact search, where the sensor surface really sits relative to the search's zero: the
-        nonlinear form of the run's offset nuisance (h0 for a leg, f0 = -k_act x0 for the actuator), which the
-        linear offset column is then taken about, both from `offset_rows`. The search's zero can be far off: on a
-        leg a drifting force baseline moves the threshold crossing; and recordings made before the runner's search
-        approached from one side only (third session) have it misplaced by up to a stage's play on the stiff bare
-        actuator. Rows this leaves out of contact read 0 (a leg at low voltage may not reach the sensor at all),
-        which an offset linearised at the search's zero cannot reach. With `sensor_drift` in `strengths`, each
-        run's drift baseline is fitted along (projected out)."""
-        strengths = strengths or {}
-        drift = "sensor_drift" in strengths
-        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
-            if not e.has_offset():
-                continue
-            force = offset_rows(e, self.offsets_from_undriven)
-            y, sig = self.y[sl][force], self.sigma[sl][force]
-            lag = self._run_lag(e)
-            basis = e.drift_columns()[force] / sig[:, None] if drift else np.zeros((int(force.sum()), 0))
-            proj = np.linalg.pinv(basis) if basis.shape[1] else None
+    def _drift_prior_rows(self, lay: Layout, out: dict[int, list[int]], j: int) -> None:
+        """The drift baseline's smoothness rows (per run), then one ridge row per drift coefficient."""
+        for k in range(len(self.engines)):
+            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
+            n_s = self._smooth_rows(k)
+            for r in range(n_s):
+                for c in cols[:-1]:
+                    out.setdefault(c, []).append(j + r)
+            j += n_s
+        for i, p in enumerate(lay.params):
+            if p.kind == "drift":
+                out.setdefault(i, []).append(j)
+                j += 1
 
-            def cost(x0: float) -> float:
-                try:
-                    m = e.predict(strengths, lag, shift_m=x0)[force]
-                except HamrBenchError:   # a shift beyond the linkage's reach
-                    return math.inf
-                z = np.nan_to_num((y - m) / sig)
-                if proj is not None:
-                    z = z - basis @ (proj @ z)
-                return float(z @ z)
+    # --- drift baseline --------------------------------------------------------------------------------------
+    def drift_columns(self, k: int, log10_tau: float) -> np.ndarray:
+        key = (k, round(float(log10_tau), 6))
+        b = self._drift_basis.get(key)
+        if b is None:
+            if len(self._drift_basis) > 4 * len(self.engines):
+                self._drift_basis.clear()
+            b = self._drift_basis[key] = self.engines[k].drift_basis(log10_tau)
+        return b
 
-            bound = SHIFT_BOUND_M[e.run.fixture]
-            grid = np.linspace(-bound, bound, 49)
-            costs = [cost(x) for x in grid]
-            j = int(np.argmin(costs))
-            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
-            r = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": bound * 1e-4})
-            self.contact_shift[k] = float(r.x) if r.fun <= costs[j] else float(grid[j])
+    def _smooth_rows(self, k: int) -> int:
+        n = self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default).shape[1]
+        return max(n - 1 - 2, 0)   # second differences of the spline coefficients (the warm-up column apart)
 
-    def _offset_columns(self) -> np.ndarray:
-        cols = []
-        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
-            if not e.has_offset():
-                continue
-            step = OFFSET_STEP[e.run.fixture]
-            lag = self._run_lag(e)
-            x0 = self.contact_shift.get(k, 0.0)
-            col = np.zeros(self.y.size)
-            col[sl] = (e.predict({}, lag, step, x0) - e.predict({}, lag, -step, x0)) / (2 * step)
-            col[sl] = np.where(offset_rows(e, self.offsets_from_undriven), col[sl], 0.0)
-            if np.any(col):
-                cols.append(col / self.sigma)
-        # Timing lag of each sensor chain, linearised about the nominal estimate: the nominal fit alone would let
-        # the lag soak up a rise/fall asymmetry that hysteresis also makes (hysteresis also moves the plateaus,
-        # which a lag cannot), so every candidate is fitted with the lag free.
-        for g in sorted(self.lag):
-            col = np.zeros(self.y.size)
-            for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
-                if e.run.fixture != g[0]:
-                    continue
-                lag_p, lag_m = self._run_lag(e), self._run_lag(e)
-                lag_p[g[1]] += LAG_STEP_S
-                lag_m[g[1]] = max(lag_m[g[1]] - LAG_STEP_S, 0.0)
-                width = lag_p[g[1]] - lag_m[g[1]]
-                x0 = self.contact_shift.get(k, 0.0)
-                col[sl] = (e.predict({}, lag_p, shift_m=x0) - e.predict({}, lag_m, shift_m=x0)) / width
-            if np.any(col):
-                cols.append(col / self.sigma)
-        return np.array(cols).T if cols else np.zeros((self.y.size, 0))
+    def _smooth_sd(self, k: int) -> float:
+        e = self.engines[k]
+        s = self.sigma[self.slices[k]][e.is_force_row]
+        return 3.0 * float(np.median(s)) if s.size else 1.0
 
-    def _drift_columns(self) -> np.ndarray:
-        """Columns of the piecewise-linear drift baselines (one per knot after each run's tare); the knot times
-        of each column's run go to `self._drift_knots` (run index, knot times, column numbers)."""
-        cols = []
-        self._drift_knots: list[tuple[int, np.ndarray, list[int]]] = []
-        for k, (e, sl) in enumerate(zip(self.engines, self.slices)):
-            block = e.drift_columns()
-            mine = []
-            for j in range(block.shape[1]):
-                col = np.zeros(self.y.size)
-                col[sl] = block[:, j]
-                mine.append(len(cols))
-                cols.append(col / self.sigma)
-            if mine:
-                self._drift_knots.append((k, e.drift_knots_s(), mine))
-        return np.array(cols).T if cols else np.zeros((self.y.size, 0))
+    # --- the residual ----------------------------------------------------------------------------------------
+    def effects_of(self, lay: Layout, x: np.ndarray) -> Effects:
+        out: Effects = {}
+        for n in lay.names:
+            shapes = {s: float(x[lay.index[("shape", n, s)]]) for s in FAMILIES[n].shapes}
+            strength = float(x[lay.index[("strength", n)]]) if ("strength", n) in lay.index else 0.0
+            out[n] = EffectValue(strength, shapes)
+        return out
 
-    def relinearised(self, strengths: dict[str, float]) -> "Problem":
-        """A copy whose sensor lags and contact shifts are re-estimated with `strengths` in the model and whose
-        nuisance columns are rebuilt there. A ramp cannot tell a time lag from a play-type memory (both delay every
-        crossing); only the plateaus can, so each candidate is judged with the lag estimated under that candidate."""
-        import copy
+    def nuisance(self, lay: Layout, x: np.ndarray, k: int) -> RunNuisance:
+        e = self.engines[k]
+        g = self.group_of(e)
+        gains = (float(x[lay.index[("gain", g, 0)]]), float(x[lay.index[("gain", g, 1)]]))
+        s_key = ("shift", self.session_of(e))
+        shift = float(x[lay.index[s_key]]) if e.has_contact() and s_key in lay.index else 0.0
+        lag = {q: float(x[lay.index[("lag",) + self.chain_of(e, q)]]) for q in self._quantities(e)}
+        return RunNuisance(gains, shift, lag)
 
-        q = copy.copy(self)
-        q.lag = dict(self.lag)
-        q.contact_shift = dict(self.contact_shift)
-        q._pinv_cache = {}
-        q._fit_contact_shifts(strengths)
-        q._fit_lags(strengths)
-        q._fit_contact_shifts(strengths)
-        q._offset_cols = q._offset_columns()
-        return q
+    def _run_model(self, k: int, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+        key = (tuple(sorted((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in effects.items()
+                            if n != "sensor_drift")),
+               nuis.gains, nuis.shift_m, tuple(sorted(nuis.lag_s.items())))
+        cache = self._cache[k]
+        v = cache.get(key)
+        if v is None:
+            if len(cache) > 24:
+                cache.clear()
+            v = cache[key] = self.engines[k].safe_predict(effects, nuis)
+        return v
 
-    def _fit_lags(self, strengths: dict[str, float] | None = None) -> None:
-        """Per (fixture, quantity) the timing lag that best fits the model (nominal unless `strengths`): a property
-        of the sensor chain (a serial load cell stamps lines after sampling), held fixed afterwards."""
-        strengths = strengths or {}
-        groups = sorted({(e.run.fixture, r.quantity) for e in self.engines for r in e.rows})
-        for g in groups:
-            idx = [i for i, e in enumerate(self.engines) if e.run.fixture == g[0]]
+    def model(self, lay: Layout, x: np.ndarray) -> np.ndarray:
+        effects = self.effects_of(lay, x)
+        out = np.empty(self.y.size)
+        for k in range(len(self.engines)):
+            out[self.slices[k]] = self._run_model(k, effects, self.nuisance(lay, x, k))
+        if "sensor_drift" in lay.names:
+            tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
+            for k in range(len(self.engines)):
+                cols = self.drift_columns(k, tau)
+                if cols.shape[1]:
+                    coef = np.array([x[lay.index[("drift", k, j)]] for j in range(cols.shape[1])])
+                    out[self.slices[k]] += cols @ coef
+        return out
 
-            def cost(lag: float) -> float:
-                self.lag[g] = lag
-                tot = 0.0
-                for i in idx:
-                    e, sl = self.engines[i], self.slices[i]
-                    m = e.predict(strengths, self._run_lag(e), shift_m=self.contact_shift.get(i, 0.0))
-                    z = ((self.y[sl] - m) / self.sigma[sl])[np.array([r.quantity == g[1] for r in e.rows])]
-                    tot += float(np.sum(z * z))
-                return tot
+    def residual(self, lay: Layout, x: np.ndarray) -> np.ndarray:
+        m = self.model(lay, x)
+        with np.errstate(invalid="ignore"):
+            z = (self.y - m) / self.sigma
+        z = np.where(np.isfinite(z), z, NAN_RESIDUAL)
+        return np.r_[z, self._prior(lay, x)]
 
-            grid = np.linspace(*LAG_BOUNDS_S, 13)
-            costs = [cost(x) for x in grid]
-            j = int(np.argmin(costs))
-            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
-            self.lag[g] = float(minimize_scalar(cost, bounds=(lo, hi), method="bounded",
-                                                options={"xatol": 2e-4}).x) if hi > lo else float(grid[j])
+    def _prior(self, lay: Layout, x: np.ndarray) -> np.ndarray:
+        out = []
+        for g in self.groups:
+            ab = np.array([x[lay.index[("gain", g, 0)]], x[lay.index[("gain", g, 1)]]])
+            out.extend(self._whiten[g] @ ab)
+        for p, v in zip(lay.params, x, strict=True):
+            if p.kind == "shape":
+                out.append((v - FAMILIES[p.key[0]].shapes[p.key[1]].default) / p.scale)
+        if "sensor_drift" in lay.names:
+            for k in range(len(self.engines)):
+                n_s = self._smooth_rows(k)
+                if n_s:
+                    c = np.array([x[lay.index[("drift", k, j)]] for j in range(n_s + 2)])
+                    out.extend(np.diff(c, 2) / self._smooth_sd(k))
+            out.extend(x[i] / DRIFT_RIDGE_N for i, p in enumerate(lay.params) if p.kind == "drift")
+        return np.asarray(out, float)
 
-    # --- the projected residual --------------------------------------------------------------------------
-    def design(self, names: Sequence[str], mask: np.ndarray | None = None) -> np.ndarray:
-        cols = [self._offset_cols]
-        if "sensor_drift" in names:
-            cols.append(self._drift_cols)
-        a = np.hstack(cols) if cols else np.zeros((self.y.size, 0))
-        return a if mask is None else a[mask]
+    # --- solving -----------------------------------------------------------------------------------------------
+    def solve(self, names: tuple[str, ...] | list[str], start: dict[tuple, float] | None = None,
+              max_nfev: int = 60) -> Fit:
+        """Fit the effects `names` with every nuisance; `start` holds parameter values to start from (any
+        subset; others from their defaults)."""
+        lay = self.layout(names)
+        x0 = lay.vector(start)
+        lo, hi = lay.bounds()
+        scale = np.array([p.scale for p in lay.params])
+        r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
+                          jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
+                          ftol=1e-6, xtol=1e-6)
+        return self._fit(lay, r.x, r.fun, r.jac)
 
-    def residual(self, strengths: dict[str, float], mask: np.ndarray | None = None,
-                 predict_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """z-residual after the linear nuisances fitted on `mask` rows; returns (z on all rows, nuisance coefs)."""
-        z0 = (self.y - self.model(strengths)) / self.sigma
-        z0 = np.nan_to_num(z0, nan=0.0)
-        drift = "sensor_drift" in strengths
-        a = self.design(list(strengths))
-        m = np.ones(self.y.size, bool) if mask is None else mask
-        if a.shape[1]:
-            # the nuisance design is fixed for a view, a mask and the drift switch: factor it once
-            key = (drift, id(self._offset_cols), m.tobytes() if mask is not None else None)
-            pinv = self._pinv_cache.get(key)
-            if pinv is None:
-                pinv = np.linalg.pinv(a[m])
-                if len(self._pinv_cache) > 32:
-                    self._pinv_cache.clear()
-                self._pinv_cache[key] = pinv
-            coef = pinv @ z0[m]
-            return z0 - a @ coef, coef
-        return z0, np.zeros(0)
+    def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:
+        j = jac.toarray() if hasattr(jac, "toarray") else np.asarray(jac)
+        effects = self.effects_of(lay, x)
+        fit = Fit(tuple(lay.names), lay, np.asarray(x, float), np.asarray(res, float), j, effects)
+        if "sensor_drift" in lay.names:
+            fit.drift_strength = self.drift_strength(lay, x)
+            effects["sensor_drift"] = EffectValue(fit.drift_strength, effects["sensor_drift"].shapes)
+        return fit
 
-    def chi2(self, strengths: dict[str, float], mask: np.ndarray | None = None) -> float:
-        """Sum of squared z on `mask` rows; inf where the strengths (with a run's contact shift) put the foot
-        beyond the linkage's reach."""
-        try:
-            z, _ = self.residual(strengths, mask)
-        except HamrBenchError:
-            return math.inf
-        m = np.ones(self.y.size, bool) if mask is None else mask
-        return float(np.sum(z[m] ** 2))
+    def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
+        """Wander rate of the fitted force baselines, N/sqrt(s): sqrt(sum of squared changes between points 4 s
+        apart / time spanned), over every run (a random walk's rate)."""
+        tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
+        ss, n = 0.0, 0.0
+        for k, e in enumerate(self.engines):
+            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
+            if cols:
+                a, b = e.drift_wander(x[cols], tau)
+                ss, n = ss + a, n + b
+        return math.sqrt(ss / n) if n else 0.0
 
-    def n_nuisance(self, names: Sequence[str]) -> int:
-        return self.design(names).shape[1]
+    def initial_nuisances(self) -> dict[tuple, float]:
+        """Starting values of the contact shifts and lags on the nominal model, by a grid per session and per
+        chain (a push-only sensor's clip makes the shift's landscape flat far from its optimum)."""
+        lay = self.layout(())
+        x = lay.vector()
+        for _ in range(2):
+            for s in self.sessions:
+                i = lay.index[("shift", s)]
+                x[i] = self._grid(lay, x, i, self._runs_where(lambda e, s_=s: e.has_contact()
+                                                             and self.session_of(e) == s_))
+            for c in self.chains:
+                i = lay.index[("lag",) + c]
+                x[i] = self._grid(lay, x, i, np.array([self.chain_of(self.engines[r.run], r.quantity) == c
+                                                       for r in self.rows]))
+        return lay.values(x)
 
-    def drift_rms_slope(self, strengths: dict[str, float], draws: int = 400, seed: int = 0
-                        ) -> tuple[float, np.ndarray, np.ndarray, list[float]]:
-        """The drift baselines fitted (with the nuisances) and their wander rate over every run's knots (the
-        baseline is 0 at the tare): q^2 = (sum dB^2 - its expectation from the knot values' noise) / sum dt, in
-        N/sqrt(s), the scale of a random walk's strength. Returns (q, knot values in N, their covariance in N^2 at
-        unit noise scale, a 95 % interval of q from draws of the knot values, each bias-corrected the same way)."""
-        z0 = np.nan_to_num((self.y - self.model(strengths)) / self.sigma)
-        a = self.design(list(strengths) + ["sensor_drift"])
-        coef, *_ = np.linalg.lstsq(a, z0, rcond=None)
-        n_off = self._offset_cols.shape[1]
-        values = coef[n_off:]
-        cov = np.linalg.pinv(a.T @ a)[n_off:, n_off:]
-        if values.size == 0:
-            return 0.0, values, cov, [0.0, 0.0]
-        # differences of consecutive knot values per run (the first from the tare's 0), as one linear map
-        rows, span = [], 0.0
-        for _run, knots, cols in self._drift_knots:
-            prev = None
-            for c in cols:
-                d = np.zeros(values.size)
-                d[c] = 1.0
-                if prev is not None:
-                    d[prev] = -1.0
-                rows.append(d)
-                prev = c
-            span += float(knots[-1] - knots[0])
-        diff = np.array(rows)
-        noise = float(np.trace(diff @ cov @ diff.T))
-
-        def rate(v: np.ndarray) -> np.ndarray:
-            ss = np.sum((np.atleast_2d(v) @ diff.T) ** 2, axis=1)
-            return np.sqrt(np.maximum(ss - noise, 0.0) / span)
-
-        q = float(rate(values)[0])
-        sample = np.random.default_rng(seed).multivariate_normal(values, cov, size=draws, method="eigh")
-        qs = rate(sample)
-        # basic (pivot) interval: the draws scatter about q as q about the truth
-        return q, values, cov, [max(0.0, 2 * q - float(np.percentile(qs, 97.5))),
-                                max(0.0, 2 * q - float(np.percentile(qs, 2.5)))]
+    def _grid(self, lay: Layout, x: np.ndarray, i: int, rows: np.ndarray, n: int = 25) -> float:
+        p = lay.params[i]
+        best, best_v = math.inf, float(x[i])
+        for v in np.linspace(p.lo, p.hi, n):
+            x[i] = v
+            z = self.residual(lay, x)[:self.y.size][rows]
+            c = float(z @ z)
+            if c < best:
+                best, best_v = c, float(v)
+        step = (p.hi - p.lo) / (n - 1)
+        for v in np.linspace(best_v - step, best_v + step, 9):
+            x[i] = min(max(v, p.lo), p.hi)
+            z = self.residual(lay, x)[:self.y.size][rows]
+            c = float(z @ z)
+            if c < best:
+                best, best_v = c, float(x[i])
+        x[i] = best_v
+        return best_v

@@ -1,26 +1,13 @@
-"""The gap report: residual map (before / after the best candidate), before/after overlays of data and model per
-protocol, and the ranking, as PNGs with a Markdown summary (`hamr-bench gap ... --report DIR`)."""
+"""The gap report (`hamr-bench gap ... --report DIR`): the residual map before / after the named effects, overlays
+of data, nominal and final model per experiment, and the waterfall (held-out gap after each named effect, with
+its interval), as PNGs with a Markdown summary."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-
-
-
-def _fitted(problem, strengths: dict) -> np.ndarray:
-    z, _ = problem.residual(strengths)
-    return problem.y - z * problem.sigma, z
-
-
-def _best_strengths(result: dict) -> dict:
-    top = next((e for e in result["ranking"] if e.get("reduction") is not None), None)
-    if top is None:
-        return {}
-    if "+" in top["effect"]:
-        return dict(zip(top["effect"].split("+"), top["strength"]))
-    return {top["effect"]: top["strength"]}
 
 
 def _group_label(problem, i: int) -> str:
@@ -110,76 +97,84 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
     plt.close(fig)
 
 
-def ranking_png(result: dict, path: Path) -> None:
+def waterfall_png(result: dict[str, Any], path: Path) -> None:
+    """Held-out RMS gap (noise units) of the nominal model and after each named effect, with 95 % bootstrap
+    intervals; the noise floor (1) as a line."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    entries = [e for e in result["ranking"] if e.get("reduction") is not None]
-    fig, ax = plt.subplots(figsize=(8, 0.5 * max(len(entries), 1) + 1.5))
-    if entries:
-        names = [f"{e['effect']} ({e['verdict']})" for e in entries]
-        red = np.array([e["reduction"] for e in entries]) * 100
-        lo = red - np.array([e["reduction_ci95"][0] for e in entries]) * 100
-        hi = np.array([e["reduction_ci95"][1] for e in entries]) * 100 - red
-        ax.barh(range(len(entries)), red, xerr=[lo, hi], color=["tab:green" if e["verdict"] == "attributed" else
-                                                                 "tab:gray" for e in entries])
-        ax.set_yticks(range(len(entries)), names)
-        ax.invert_yaxis()
-    else:
-        ax.text(0.5, 0.5, "no candidate passed screening", ha="center", transform=ax.transAxes)
-    ax.set_xlabel("held-out gap reduction (%) with 95 % bootstrap interval over conditions")
+    steps = result["waterfall"]
+    labels = ["nominal"] + [f"+ {w['added']}" + (f"\n(or {', '.join(w['ambiguous_with'])})" if w["ambiguous_with"]
+                                                  else "") for w in steps[1:]]
+    y = np.array([w["heldout_rms"] for w in steps])
+    lo = y - np.array([w["heldout_rms_ci95"][0] for w in steps])
+    hi = np.array([w["heldout_rms_ci95"][1] for w in steps]) - y
+    verdict = {e["effect"]: e["verdict"] for e in result["named"]}
+    colours = ["tab:gray"] + ["tab:green" if verdict.get(w["added"]) == "attributed" else "tab:orange"
+                              for w in steps[1:]]
+    fig, ax = plt.subplots(figsize=(1.8 * len(steps) + 3, 4))
+    ax.bar(range(len(steps)), y, yerr=[np.maximum(lo, 0), np.maximum(hi, 0)], color=colours, capsize=4)
+    ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
+    ax.set_xticks(range(len(steps)), labels, fontsize=8)
+    ax.set_yscale("log")
+    ax.set_ylabel("held-out RMS gap (residual / standard error)")
+    ax.set_title("held-out gap after each named effect (green: attributed, orange: ambiguous or partial)",
+                 fontsize=9)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def write_report(result: dict, out_dir: Path) -> Path:
+def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    problem = result["_problem"]
-    strengths = _best_strengths(result)
-    label = " + ".join(f"{k} {v:.3g}" for k, v in strengths.items()) or "no candidate"
-    fit0, z0 = _fitted(problem, {})
-    # under the winner the run offsets are re-estimated (they depend on effects that act on the undriven rows)
-    fit1, z1 = _fitted(problem.relinearised(strengths), strengths) if strengths else (fit0, z0)
-    residual_map_png(problem, z0, z1, label, out_dir / "residual_map.png")
+    problem = diagnosis.fits["problem"]
+    nominal, final = diagnosis.fits["nominal"], diagnosis.fits["final"]
+    fit0 = problem.model(nominal.layout, nominal.x)
+    fit1 = problem.model(final.layout, final.x)
+    label = " + ".join(e["effect"] for e in result["named"]) or "no effect named"
+    residual_map_png(problem, nominal.z, final.z, label, out_dir / "residual_map.png")
     overlays_png(problem, fit0, fit1, label, out_dir / "overlays.png")
-    ranking_png(result, out_dir / "ranking.png")
-    nominal = result["nominal_lack_of_fit"]
+    waterfall_png(result, out_dir / "waterfall.png")
+    nominal_lof = result["nominal_lack_of_fit"]
     lines = ["# Sim-to-real gap diagnosis", "",
-             f"Recordings: {', '.join(Path(r.path).name for r in problem.data.runs)}.",
-             f"Residuals are against the nominal model ({result.get('nominal_source', 'presets')}); units of the "
-             f"held-out figures: {result['heldout_units']}.", "",
-             "## Where", "",
+             f"Recordings: {', '.join(sorted({Path(r.path).name for r in problem.data.runs}))}.",
+             f"Residuals are against the nominal model ({result.get('nominal_source', 'presets')}) with each "
+             f"specimen fitted within its fabrication tolerances; held-out figures in {result['heldout_units']}.",
+             "", "## Where", "",
              f"Gap above the noise floor: **{'yes' if result['gap_above_noise'] else 'no'}** (lack-of-fit F test "
-             f"p = {nominal['p_value']:.3g}; RMS residual {nominal['z_rms']:.2f} x the pure-error standard error).",
-             "", "![residual map](residual_map.png)", "",
+             f"p = {nominal_lof['p_value']:.3g}; RMS residual {nominal_lof['z_rms']:.2f} x the pure-error standard "
+             "error).", "", "![residual map](residual_map.png)", "",
              "| protocol | condition | RMS gap | noise floor | p (lack of fit) |", "|---|---|---|---|---|"]
     for g in result["where"][:15]:
         lines.append(f"| {g['protocol']} | {g['condition']} | {g['rms_gap']:.3g} | {g['noise_floor']:.3g} | "
                      f"{g['p_value']:.2g} |")
-    lines += ["", "## Which", "", "![ranking](ranking.png)", "",
-              "| effect | verdict | strength [95 % CI] | held-out RMS before -> after | reduction [95 % CI] | "
-              "closed fraction | confusable with |", "|---|---|---|---|---|---|---|"]
-    for e in result["ranking"]:
-        if e.get("reduction") is None:
-            continue
-        ci = e.get("strength_ci95")
-        st = (", ".join(f"{v:.3g}" for v in e["strength"]) if isinstance(e["strength"], list)
-              else f"{e['strength']:.3g}") + (f" [{ci[0]:.3g}, {ci[1]:.3g}]" if ci else "")
-        lines.append(f"| {e['effect']} | {e['verdict']} | {st} {e['unit'] if isinstance(e['unit'], str) else ''} | "
-                     f"{e['heldout_rms_before']:.2f} -> {e['heldout_rms_after']:.2f} | {e['reduction']:.0%} "
-                     f"[{e['reduction_ci95'][0]:.0%}, {e['reduction_ci95'][1]:.0%}] | {e['closed_fraction']:.2f} | "
-                     f"{', '.join(e['confusable_with']) or '-'} |")
-    lines += ["", f"**Best: {result['best'] or 'none'}**", "", "## How far", "",
-              "![overlays](overlays.png)", ""]
-    top = next((e for e in result["ranking"] if e.get("closes") is not None), None)
-    if top:
-        lines += [f"Regions {top['effect']} closes (no longer significant): "
-                  f"{'; '.join(top['closes']) or 'none'}.", "",
-                  f"Regions it leaves: {'; '.join(top['leaves']) or 'none'}.", ""]
+    lines += ["", "## Which, and how much of the gap", "", "![waterfall](waterfall.png)", "",
+              "| effect | verdict | strength [95 % CI] | held-out RMS before -> after | closes | confusable with |",
+              "|---|---|---|---|---|---|"]
+    for e in result["named"]:
+        ci = e["strength_ci95"]
+        lines.append(f"| {e['effect']} | {e['verdict']} | {e['strength']:.3g} [{ci[0]:.3g}, {ci[1]:.3g}] "
+                     f"{e['unit']} | {e['heldout_rms_before']:.2f} -> {e['heldout_rms_after']:.2f} | "
+                     f"{e['closed_fraction']:.0%} | {', '.join(e['confusable_with']) or '-'} |")
+    if not result["named"]:
+        lines.append("| none | | | | | |")
+    for c in result["cannot_separate"]:
+        lines += ["", f"The data cannot separate {', '.join(c['effects'])}. Measurements that would: "
+                  + "; ".join(f"{k}: {v}" for k, v in c["separated_by"].items() if v) + "."]
+    rest = result["unexplained"]
+    lines += ["", f"Left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise "
+              f"[{rest['heldout_rms_ci95'][0]:.2f}, {rest['heldout_rms_ci95'][1]:.2f}]"
+              + (" (at the noise floor)." if rest["at_noise_floor"] else "."),
+              "", f"**Best: {result['best'] or 'none'}**", "", "## Specimens", "",
+              "| specimen | free stroke vs preset | stiffness vs preset | tolerance sigmas |", "|---|---|---|---|"]
+    for g, v in result["specimens"].items():
+        lines.append(f"| {g} | {v['stroke_change']:+.1%} | {v['stiffness_change']:+.1%} | "
+                     f"{v['tolerance_sigmas']:.2f} |")
+    lines += ["", "## How far", "", "![overlays](overlays.png)", ""]
     path = out_dir / "gap.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path

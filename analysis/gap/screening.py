@@ -1,73 +1,72 @@
-"""Screening: each candidate's signature (the change of the z-residual per unit strength at zero strength, with
-the nuisance directions (zero offsets, and for drift its own slopes) projected out), its score-test statistic
-against the nominal residual, and the angles between signatures: |cos| near 1 = this data cannot tell the two
-effects apart at first order."""
+"""Stage 1, screen: every candidate fitted alone on top of the nominal fit (its strength and shapes with the
+specimen gains and every nuisance refitted), and a likelihood-ratio test of its improvement, scaled by the
+over-dispersion the best single candidate leaves, at 0.01 / (number of candidates) (Bonferroni)."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy import stats
 
-from analysis.gap.library import CANDIDATES
-from analysis.gap.problem import Problem
+from analysis.gap.families import FAMILIES
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.results import Screened
 
-# finite-difference steps (small against realistic strengths, large against round-off)
-STEP = {"field_dependent_d31": 0.02, "hysteresis": 0.01, "creep": 0.003, "base_compliance": 0.02,
-        "sensor_compliance": 5e-5, "width_loss": 0.02, "bias_error": 3e-6, "stage_backlash": 2e-6}
-
-
-def _project_out(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    if a.shape[1] == 0:
-        return v
-    coef, *_ = np.linalg.lstsq(a, v, rcond=None)
-    return v - a @ coef
+SCREEN_ALPHA = 0.01
 
 
-def signatures(problem: Problem, names: list[str], z0: np.ndarray) -> dict[str, np.ndarray]:
-    a = problem.design([])
-    m0 = problem.model({})
-    out = {}
+def grid_start(p: Problem, base: Fit, name: str) -> dict[tuple, float]:
+    """Start values for adding `name` to `base`: base's parameters and the best strength on a coarse grid (the
+    landscape of a memory or contact effect is not convex from 0)."""
+    names = tuple(base.names) + (name,)
+    lay = p.layout(names)
+    start = dict(base.values())
+    f = FAMILIES[name]
+    if f.kind == "baseline":
+        return start
+    lo, hi = f.bounds
+    grid = [s * f.scale for s in (-4, -2, -1, -0.5, 0.5, 1, 2, 4, 8)]
+    grid = [min(max(g, lo), hi) for g in grid if lo <= g <= hi or (lo < g and hi == math.inf)]
+    best, best_s = math.inf, 0.0
+    for s in sorted(set(grid)):
+        x = lay.vector({**start, ("strength", name): s})
+        r = p.residual(lay, x)
+        c = float(r @ r)
+        if c < best:
+            best, best_s = c, s
+    start[("strength", name)] = best_s
+    return start
+
+
+def n_params(p: Problem, name: str) -> int:
+    """Free parameters a candidate adds: its strength and shapes (the drift: its baseline coefficients)."""
+    f = FAMILIES[name]
+    if f.kind == "baseline":
+        return max(1, p.layout((name,)).params.__len__() - p.layout(()).params.__len__())
+    return 1 + len(f.shapes)
+
+
+def overdispersion(p: Problem, fit: Fit, n_extra: int = 0) -> float:
+    dof = max(p.y.size - len(fit.layout.params) - n_extra, 1)
+    return max(1.0, fit.objective / dof)
+
+
+def threshold(p: Problem, name: str, scale2: float, n_candidates: int) -> float:
+    return float(stats.chi2.ppf(1 - SCREEN_ALPHA / max(n_candidates, 1), n_params(p, name))) * scale2
+
+
+def screen(p: Problem, nominal: Fit, names: list[str]) -> tuple[list[Screened], dict[str, Fit]]:
+    fits: dict[str, Fit] = {}
     for n in names:
-        if n == "sensor_drift":
-            d = problem._drift_cols
-            if d.shape[1] == 0:
-                continue
-            # the drift subspace's best single direction for this residual
-            proj = _project_out(a, d)
-            coef, *_ = np.linalg.lstsq(proj, z0, rcond=None)
-            out[n] = proj @ coef
-            continue
-        h = STEP[n]
-        dm = (problem.model({n: h}) - m0) / h / problem.sigma
-        out[n] = _project_out(a, -np.nan_to_num(dm))   # a positive strength moves z by -dm
-    return out
-
-
-def screen(problem: Problem, z0: np.ndarray, names: list[str] | None = None) -> dict:
-    names = names or list(CANDIDATES)
-    sig = signatures(problem, names, z0)
-    scores = {}
-    for n, s in sig.items():
-        ss = float(s @ s)
-        if ss <= 0:
-            scores[n] = {"score_chi2": 0.0, "p_value": 1.0}
-            continue
-        df = problem._drift_cols.shape[1] if n == "sensor_drift" else 1
-        chi2 = float((s @ z0) ** 2 / ss)
-        scores[n] = {"score_chi2": chi2, "p_value": float(stats.chi2.sf(chi2, df))}
-    keys = list(sig)
-    cos = {}
-    for i, a in enumerate(keys):
-        for b in keys[i + 1:]:
-            na, nb = np.linalg.norm(sig[a]), np.linalg.norm(sig[b])
-            cos[(a, b)] = float(abs(sig[a] @ sig[b]) / (na * nb)) if na > 0 and nb > 0 else 0.0
-    return {"scores": scores, "cos": cos, "signatures": sig}
-
-
-def confusable_pairs(cos: dict, threshold: float = 0.95) -> dict[str, list[str]]:
-    out: dict[str, list[str]] = {}
-    for (a, b), c in cos.items():
-        if c >= threshold:
-            out.setdefault(a, []).append(b)
-            out.setdefault(b, []).append(a)
-    return out
+        fits[n] = p.solve(tuple(nominal.names) + (n,), grid_start(p, nominal, n), max_nfev=25)
+    best = min((f.objective for f in fits.values()), default=nominal.objective)
+    scale2 = max(1.0, best / max(p.y.size - len(nominal.layout.params) - 2, 1))
+    out = []
+    for n, f in fits.items():
+        imp = nominal.objective - f.objective
+        thr = threshold(p, n, scale2, len(names))
+        strength = f.effects[n].strength
+        out.append(Screened(n, float(strength), dict(f.effects[n].shapes), float(imp), thr,
+                            bool(imp > thr and np.isfinite(imp)), start=f.values()))
+    return out, fits

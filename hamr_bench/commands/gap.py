@@ -44,53 +44,53 @@ def load_params(path: Path | None) -> dict | None:
     return data
 
 
-def to_json(result: dict) -> dict:
-    keys = ("where", "ranking", "best", "gap_above_noise", "nominal_lack_of_fit", "phase_map", "screening",
-            "signature_cos", "sensor_lag_s", "heldout_units", "elapsed_s", "recordings")
-    return {k: result[k] for k in keys if k in result}
-
-
 def format_text(result: dict) -> str:
-    lines = [f"gap above noise: {'yes' if result['gap_above_noise'] else 'no'} "
-             f"(lack-of-fit p = {result['nominal_lack_of_fit']['p_value']:.3g}, "
-             f"RMS gap {result['nominal_lack_of_fit']['z_rms']:.2f} x noise)", "", "where (largest first):"]
+    """The JSON result (`Diagnosis.to_json`) as a few lines for a terminal."""
+    lack = result["nominal_lack_of_fit"]
+    lines = [f"gap above noise: {'yes' if result['gap_above_noise'] else 'no'} (lack-of-fit p = {lack['p_value']:.3g}, "
+             f"RMS gap {lack['z_rms']:.2f} x noise, after fitting each specimen within its tolerances)", "",
+             "where (largest first):"]
     for g in result["where"][:8]:
         lines.append(f"  {g['protocol']:18s} {g['condition']:40s} gap {g['rms_gap']:.3g} vs noise "
                      f"{g['noise_floor']:.3g} ({g['quantity']}), p = {g['p_value']:.2g}")
-    lines += ["", "ranking:"]
-    for e in result["ranking"]:
-        if e.get("reduction") is None:
-            continue
-        ci = e.get("strength_ci95")
-        ci_text = f" [{ci[0]:.4g}, {ci[1]:.4g}]" if ci else ""
-        strength = e["strength"] if isinstance(e["strength"], list) else f"{e['strength']:.4g}"
-        lines.append(f"  {e['effect']:40s} {e['verdict']:12s} strength {strength}{ci_text} {e['unit']}; held-out "
-                     f"RMS {e['heldout_rms_before']:.2f} -> {e['heldout_rms_after']:.2f} x noise, reduction "
-                     f"{e['reduction']:.0%} [{e['reduction_ci95'][0]:.0%}, {e['reduction_ci95'][1]:.0%}]"
+    lines += ["", "waterfall (held-out RMS gap, noise units; 1 = the noise floor):"]
+    for w in result["waterfall"]:
+        label = "nominal" if w["added"] is None else f"+ {w['added']}"
+        amb = f" (or {', '.join(w['ambiguous_with'])})" if w["ambiguous_with"] else ""
+        lines.append(f"  {label:30s} {w['heldout_rms']:.2f} [{w['heldout_rms_ci95'][0]:.2f}, "
+                     f"{w['heldout_rms_ci95'][1]:.2f}]{amb}")
+    lines += ["", "named effects:"]
+    for e in result["named"]:
+        ci = e["strength_ci95"]
+        lines.append(f"  {e['effect']:22s} {e['verdict']:16s} strength {e['strength']:.4g} [{ci[0]:.4g}, {ci[1]:.4g}] "
+                     f"{e['unit']}; closes {e['closed_fraction']:.0%} of the held-out gap"
                      + (f"; confusable with {', '.join(e['confusable_with'])}" if e["confusable_with"] else ""))
-    lines += ["", f"best: {result['best'] or 'none (no single effect explains the gap)'}"]
+    if not result["named"]:
+        lines.append("  none")
+    for c in result["cannot_separate"]:
+        lines.append(f"  cannot separate {', '.join(c['effects'])}: "
+                     + "; ".join(f"{k}: {v}" for k, v in c["separated_by"].items() if v))
+    rest = result["unexplained"]
+    lines += ["", f"left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise"
+              + (" (at the noise floor)" if rest["at_noise_floor"] else ""),
+              f"best: {result['best'] or 'none (no attributed effect)'}"]
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
-    from analysis.gap.attribution import diagnose
+    from analysis.gap.diagnose import diagnose
+    from analysis.gap.families import check_names
     from analysis.gap.features import load_gap_data
-    from analysis.gap.library import check_names
 
     names = check_names(args.effects.split(",")) if args.effects else None
     params = load_params(args.params)
     data = load_gap_data(args.recordings, jobs=args.jobs, scheduler=args.scheduler)
-    result = diagnose(data, params, names, seed=args.seed)
-    # per run: its specimen, session (the nuisance grouping) and which timelines were commanded or inferred
-    result["recordings"] = data.provenance()
-    result["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
+    diagnosis = diagnose(data, params, names, seed=args.seed)
+    out = diagnosis.to_json()
+    out["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
     if args.report:
         from analysis.gap.report import write_report
 
-        path = write_report(result, args.report)
-        result["report"] = str(path)
-    out = to_json(result)
-    if args.report:
-        out["report"] = result["report"]
-    print(json.dumps(out, indent=1, default=float) if args.json else format_text(result))
+        out["report"] = str(write_report(diagnosis, out, args.report))
+    print(json.dumps(out, indent=1, default=float) if args.json else format_text(out))
     return 0

@@ -7,6 +7,8 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hamr_bench.model.designs import DEFAULT_KAPPA_UNITS, KAPPA_READINGS
+
     parser = subparsers.add_parser("model", help="evaluate the actuator or leg (powertrain) model")
     sub = parser.add_subparsers(dest="model_command", metavar="WHAT")
 
@@ -28,6 +30,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--layers", type=int, choices=(1, 2, 3), default=2)
     g.add_argument("--params", choices=("reported", "effective"), default="effective")
     g.add_argument("--voltage-limit", type=float, default=250.0, metavar="V")
+    g.add_argument("--kappa-units", choices=tuple(KAPPA_READINGS), default=DEFAULT_KAPPA_UNITS,
+                   help=f"reading of Table III's kappa units, with its geometry (default {DEFAULT_KAPPA_UNITS})")
+    g.add_argument("--friction-mu", type=float, default=0.0, metavar="MU",
+                   help="blocked-force test: Coulomb friction at the foot, the foot sliding as the drive presses "
+                        "it (default 0, frictionless)")
     g.add_argument("--json", action="store_true")
     g.set_defaults(func=run_leg)
     parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
@@ -82,17 +89,22 @@ def run_leg(args: argparse.Namespace) -> int:
     from hamr_bench.errors import ConfigError
     from hamr_bench.model import powertrain
 
-    p = powertrain(args.design, layers=args.layers, params=args.params, voltage_limit_V=args.voltage_limit)
-    meta = dict(design=args.design, name=p.design.name, test=args.test, layers=args.layers, params=args.params)
+    if not (0.0 <= args.friction_mu < 1.0):
+        raise ConfigError(f"--friction-mu must be in [0, 1), got {args.friction_mu:g}")
+    p = powertrain(args.design, layers=args.layers, params=args.params, voltage_limit_V=args.voltage_limit,
+                   kappa_units=args.kappa_units)
+    meta = dict(design=args.design, name=p.design.name, test=args.test, layers=args.layers, params=args.params,
+                kappa_units=args.kappa_units)
     if args.test == "blocked-force":
         volts = args.voltage if args.voltage is not None else [100.0, 150.0, 200.0, 250.0]
         sags = args.sag if args.sag is not None else [0.0]
         _check_voltages(volts, args.voltage_limit)
         V, S = np.meshgrid(np.asarray(volts, float), np.asarray(sags, float), indexing="ij")
-        F = p.blocked_force_N(V, S)
+        F = p.blocked_force_N(V, S, friction_mu=args.friction_mu)
         points = [dict(voltage_V=float(v), sag_m=float(s), force_N=float(f))
                   for v, s, f in zip(V.ravel(), S.ravel(), F.ravel())]
         meta["convention"] = "V_drive = V_bias = voltage; sensor raised sag_m above the undriven neutral"
+        meta["friction_mu"] = args.friction_mu
     elif args.test == "free-displacement":
         volts = args.voltage if args.voltage is not None else [100.0, 150.0, 200.0, 250.0]
         _check_voltages(volts, args.voltage_limit)

@@ -1,51 +1,58 @@
-"""The five transmission designs (paper Table II), their fitted parameters (Table III), the kappa-unit decision and
-the one lift-transmission geometry every design shares (link lengths are unpublished; see docs/model.md).
+"""The five transmission designs (paper Table II), their fitted parameters (Table III), the three readings of
+Table III's kappa units, and the lift-transmission geometry each reading uses (link lengths are unpublished; see
+docs/model.md, "Kappa units and geometry").
 
-Kappa units: Table III prints "N m/rad"; read literally, kappa_1 = 0.019-0.023 N m/rad is ~500x a 25 um Kapton
-flexure (E w t^3 / 12 L ~ 4e-5 N m/rad) and makes designs 2 and 4 far too stiff for the paper's own 0.5 mm static
-sag. We read them as N mm/rad (x 1e-3 to N m/rad). `claims.py` re-evaluates the static-sag claim under both
-readings at run time, so the decision is arbitrated by the model, not asserted.
+Kappa readings (`kappa_units`): Table III prints "N m/rad". Read literally ("printed"), kappa_1 = 0.019-0.023 is
+hundreds of times a Kapton flexure's pseudo-rigid-body stiffness; "nmm" reads every entry as N mm/rad (x 1e-3);
+"mixed" reads kappa_1 as N mm/rad and kappa_2, kappa_3 as printed, which puts all six fitted values within a few
+times the pseudo-rigid-body estimate. The geometry search was run under each reading; each reading has its own
+geometry (GEOMETRIES). `hamr-bench paper` re-evaluates all three at run time.
 
 Table III entries printed "< 1e-6" are taken as 0 (an upper bound far below every other term).
 Design 5 has no Table III column: it uses design 4's values plus the swing-chain coupling below.
+Every design's coupler carries its load through two Kapton strips of its own thickness (flexures.FlexureStrip),
+which buckle past their Euler load (`coupler_buckling`, on by default).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from hamr_bench.errors import ModelError
+from hamr_bench.model.flexures import NOMINAL_FLEXURE_LENGTH_M, NOMINAL_FLEXURE_WIDTH_M, FlexureStrip
 from hamr_bench.model.transmission import SliderCrankGeometry
 
-KAPPA_UNIT_N_M_PER_RAD = 1e-3   # Table III kappa value x this = N m/rad (we read the column as N mm/rad)
+# Table III kappa value x factor = N m/rad, per joint (kappa_1, kappa_2, kappa_3), for each reading of its units.
+KAPPA_READINGS: dict[str, tuple[float, float, float]] = {
+    "printed": (1.0, 1.0, 1.0),       # as printed: N m/rad
+    "nmm": (1e-3, 1e-3, 1e-3),        # every entry in N mm/rad
+    "mixed": (1e-3, 1.0, 1.0),        # kappa_1 in N mm/rad, kappa_2 and kappa_3 as printed
+}
+DEFAULT_KAPPA_UNITS = "nmm"
 
-# The one geometry (see docs/model.md, "Geometry and sources"). All six numbers were chosen once by
-# `geometry_search.py` (seed 1) inside plausible bounds (PC-MEMS link scale 0.3-3 mm, HAMR-VI URDF crank 0.592 mm /
-# coupler 1.945 mm / foot 7.6 mm as the scale leads, leg 4-12 mm) for the largest worst-case margin over the
-# transmission claims with kappa in N mm/rad, then rounded to 1 um / 1 mrad. The same numbers serve all designs.
-# The margin is thin (+0.3 %) and a 1 % change of any parameter flips a claim: claims.py reports this.
-GEOMETRY = SliderCrankGeometry(
-    crank_m=0.347e-3,
-    coupler_m=0.566e-3,
-    offset_m=0.021e-3,
-    theta_fab_rad=1.070,
-    leg_length_m=7.01e-3,
-    leg_angle0_rad=0.555,
-)
+# The geometry each reading uses, found by `geometry_search.py` under that reading (see docs/model.md for the
+# command, its cost and the margins). Bounds: PC-MEMS link scale 0.3-3 mm, HAMR-VI URDF crank 0.592 mm / coupler
+# 1.945 mm / foot 7.6 mm as the scale leads, leg 4-12 mm; rounded to 1 um / 1 mrad.
+GEOMETRIES: dict[str, SliderCrankGeometry] = {
+    "nmm": SliderCrankGeometry(crank_m=0.347e-3, coupler_m=0.566e-3, offset_m=0.021e-3, theta_fab_rad=1.070,
+                               leg_length_m=7.01e-3, leg_angle0_rad=0.555),
+    "printed": SliderCrankGeometry(crank_m=0.475e-3, coupler_m=1.719e-3, offset_m=0.997e-3, theta_fab_rad=1.350,
+                                   leg_length_m=10.51e-3, leg_angle0_rad=0.885),
+    "mixed": SliderCrankGeometry(crank_m=0.600e-3, coupler_m=0.601e-3, offset_m=0.385e-3, theta_fab_rad=2.863,
+                                 leg_length_m=8.935e-3, leg_angle0_rad=0.770),
+}
+GEOMETRY = GEOMETRIES[DEFAULT_KAPPA_UNITS]
 
-# The best geometry the same search finds when Table III kappa is read literally as N m/rad (kappa_unit 1.0).
-# NOT used by the model: claims.py evaluates it at run time to show whether the static sag alone can decide the
-# unit. It hides the large kappa_1 by parking joint 1 where the coupler barely rotates (dPhi_1/dtheta ~ 0.01).
-LITERAL_KAPPA_GEOMETRY = SliderCrankGeometry(
-    crank_m=0.475e-3,
-    coupler_m=1.719e-3,
-    offset_m=0.997e-3,
-    theta_fab_rad=1.350,
-    leg_length_m=10.51e-3,
-    leg_angle0_rad=0.885,
-)
+
+def check_kappa_units(kappa_units: str) -> str:
+    if kappa_units not in KAPPA_READINGS:
+        raise ModelError(f"kappa_units must be one of {', '.join(KAPPA_READINGS)}, got {kappa_units!r}")
+    return kappa_units
+
 
 # Swing DOF (design 5): the spherical five-bar couples the swing chain into the lift rotation by a small ratio
 # epsilon = d theta_swing / d theta_lift, set by fold/assembly misalignment of the two (nominally orthogonal)
@@ -66,6 +73,10 @@ class DesignParams:
     swing: bool = False
     swing_coupling: float = 0.0
     geometry: SliderCrankGeometry = field(default=GEOMETRY)
+    kappa_units: str = DEFAULT_KAPPA_UNITS     # the reading the kappa values came from (provenance)
+    flexure_width_m: float = NOMINAL_FLEXURE_WIDTH_M
+    flexure_length_m: float = NOMINAL_FLEXURE_LENGTH_M
+    coupler_buckling: bool = True              # the coupler's two strips buckle past their Euler load
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.k_ser_N_per_m) or self.k_ser_N_per_m <= 0:
@@ -82,9 +93,14 @@ class DesignParams:
     def coupler_m(self) -> float:
         return self.geometry.coupler_m + self.bias_m
 
+    @property
+    def flexure_strip(self) -> FlexureStrip:
+        """The Kapton strip of this design's joints (its own film thickness, the nominal planform)."""
+        return FlexureStrip(self.kapton_thickness_m, self.flexure_width_m, self.flexure_length_m)
 
-# Table II + Table III (raw printed numbers; kappa converted with KAPPA_UNIT_N_M_PER_RAD).
-_TABLE = {
+
+# Table II + Table III (raw printed numbers; kappa converted per reading with KAPPA_READINGS).
+_TABLE: dict[int, dict[str, Any]] = {
     1: dict(name="baseline", kapton_thickness_m=12.5e-6, bias_designed_m=0.0, k_ser_N_per_m=800.0,
             kappa=(0.0, 2.41e-5, 0.0), bias_m=-10e-6),
     2: dict(name="double thick Kapton", kapton_thickness_m=25e-6, bias_designed_m=0.0, k_ser_N_per_m=810.0,
@@ -96,15 +112,23 @@ _TABLE = {
 }
 
 
-def design_preset(design: int, kappa_unit_N_m_per_rad: float = KAPPA_UNIT_N_M_PER_RAD,
-                  geometry: SliderCrankGeometry = GEOMETRY) -> DesignParams:
-    """Design 1..5 (Table II) with its Table III parameters; design 5 = design 4 + swing DOF."""
+def design_preset(design: int, kappa_units: str = DEFAULT_KAPPA_UNITS,
+                  geometry: SliderCrankGeometry | None = None, **changes) -> DesignParams:
+    """Design 1..5 (Table II) with its Table III parameters under a kappa reading; design 5 = design 4 + swing DOF.
+
+    `geometry` defaults to the one searched for that reading (GEOMETRIES); `changes` replace other fields
+    (e.g. flexure_length_m, coupler_buckling=False).
+    """
     if design not in (1, 2, 3, 4, 5):
         raise ModelError(f"design must be 1..5, got {design!r}")
+    check_kappa_units(kappa_units)
+    geometry = GEOMETRIES[kappa_units] if geometry is None else geometry
     if design == 5:
-        base = design_preset(4, kappa_unit_N_m_per_rad, geometry)
+        base = design_preset(4, kappa_units, geometry, **changes)
         return replace(base, design=5, name="biased with double thick Kapton - 2 DOF", swing=True,
                        swing_coupling=SWING_COUPLING)
     t = dict(_TABLE[design])
-    kappa = tuple(float(k) * kappa_unit_N_m_per_rad for k in t.pop("kappa"))
-    return DesignParams(design=design, kappa_N_m_per_rad=kappa, geometry=geometry, **t)
+    k1, k2, k3 = (float(k) * f for k, f in zip(t.pop("kappa"), KAPPA_READINGS[kappa_units], strict=True))
+    kappa = (k1, k2, k3)
+    d = DesignParams(design=design, kappa_N_m_per_rad=kappa, geometry=geometry, kappa_units=kappa_units, **t)
+    return replace(d, **changes) if changes else d

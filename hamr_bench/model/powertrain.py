@@ -36,7 +36,9 @@ from hamr_bench.model import actuator as act
 from hamr_bench.model import transmission as tr
 from hamr_bench.model.actuator import ActuatorParams, actuator_preset
 from hamr_bench.model.designs import DesignParams, design_preset
+from hamr_bench.model.contact import PRESSING, friction_reading_ratio
 from hamr_bench.model.effects import Effect, active, apply_voltage_series
+from hamr_bench.model.flexures import SerialChain
 
 DEFAULT_VOLTAGE_LIMIT_V = 250.0
 _GRID_POINTS = 97
@@ -69,6 +71,8 @@ class Powertrain:
         self.A = 1.0 / (1.0 + self.k_act_N_per_m / self.k_ser_N_per_m)
         self.k_eff_N_per_m = self.A * self.k_act_N_per_m
         self.kappa = np.asarray(design.kappa_N_m_per_rad, dtype=float)
+        # The coupler's Kapton strips buckle past their Euler load: the serial chain softens (flexures.py).
+        self.serial_chain = SerialChain(self.k_eff_N_per_m, design.flexure_strip) if design.coupler_buckling else None
 
         g = self.geometry
         # Swing chain rotational stiffness at its own crank (undriven, unbiased copy of this transmission).
@@ -145,7 +149,24 @@ class Powertrain:
         phi = tr.joint_angles_rad(g, c, th)
         flex = 0.5 * np.tensordot(self.kappa, phi**2, axes=1)
         sw = 0.5 * self.k_swing_coupled * (th - g.theta_fab_rad) ** 2
-        return 0.5 * self.k_eff_N_per_m * (d - np.asarray(u_m)) ** 2 + flex + sw
+        return self.chain_energy_J(np.asarray(u_m) - d) + flex + sw
+
+    def chain_force_N(self, gap_m: ArrayLike) -> np.ndarray:
+        """Force through the actuator-serial-coupler chain for an overlap gap = u - delta_tra (> 0: compression)."""
+        if self.serial_chain is None:
+            return self.k_eff_N_per_m * np.asarray(gap_m, dtype=float)
+        return self.serial_chain.force_N(gap_m)
+
+    def chain_energy_J(self, gap_m: ArrayLike) -> np.ndarray:
+        if self.serial_chain is None:
+            return 0.5 * self.k_eff_N_per_m * np.asarray(gap_m, dtype=float) ** 2
+        return self.serial_chain.energy_J(gap_m)
+
+    def coupler_force_N(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike, foot_height_m: ArrayLike) -> np.ndarray:
+        """Compression carried by the input link (along the transmission input) with the foot held at a height."""
+        u = self.free_actuator_deflection_m(v_bias_V, v_drive_V)
+        th = self.theta_at_height(foot_height_m)
+        return self.chain_force_N(u - tr.delta_tra_m(self.geometry, self.coupler_m, th))
 
     def _flex_torque(self, th: np.ndarray) -> np.ndarray:
         g, c = self.geometry, self.coupler_m
@@ -159,7 +180,7 @@ class Powertrain:
         th = np.asarray(theta_rad, dtype=float)
         d = tr.delta_tra_m(g, c, th)
         dd = tr.ddelta_tra_dtheta(g, c, th)
-        return self.k_eff_N_per_m * (d - np.asarray(u_m)) * dd + self._flex_torque(th)
+        return -self.chain_force_N(np.asarray(u_m) - d) * dd + self._flex_torque(th)
 
     # --- solver ------------------------------------------------------------------------------------------------
     def _operating_range(self) -> tuple[float, float]:
@@ -174,12 +195,10 @@ class Powertrain:
         if not ok[i0]:
             raise ModelError(f"design {self.design.design}: transmission geometry cannot close or is at a toggle "
                              f"at theta_fab (coupler_m={c:.6g}, crank_m={g.crank_m:.6g}, offset_m={g.offset_m:.6g})")
-        lo = i0
-        while lo > 0 and ok[lo - 1]:
-            lo -= 1
-        hi = i0
-        while hi < th.size - 1 and ok[hi + 1]:
-            hi += 1
+        # the contiguous run of `ok` around i0
+        bad = np.flatnonzero(~ok)
+        lo = int(bad[bad < i0].max()) + 1 if np.any(bad < i0) else 0
+        hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
         return float(th[lo]), float(th[hi])
 
     def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray) -> np.ndarray:
@@ -192,7 +211,8 @@ class Powertrain:
         delta = self._x_ref - r * cs - q
         ddelta = r * sn + s * r * cs / q
         phi3 = th - g.theta_fab_rad
-        out = self.k_eff_N_per_m * (delta - u) * ddelta - load * (-g.leg_length_m * np.cos(g.leg_angle0_rad + phi3))
+        chain = self.k_eff_N_per_m * (u - delta) if self.serial_chain is None else self.serial_chain.force_N(u - delta)
+        out = load * g.leg_length_m * np.cos(g.leg_angle0_rad + phi3) - chain * ddelta
         if self._has_flex:
             dpsi = -r * cs / q
             phi1 = -np.arcsin(s / l) - self._psi_fab
@@ -259,21 +279,32 @@ class Powertrain:
     def theta_at_height(self, foot_height_m: ArrayLike) -> np.ndarray:
         return tr.theta_from_foot_height(self.geometry, np.asarray(foot_height_m, float) + self._h_neutral_fab)
 
-    def foot_force_N(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike, foot_height_m: ArrayLike) -> np.ndarray:
+    def foot_force_N(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike, foot_height_m: ArrayLike,
+                     friction_mu: ArrayLike = 0.0, foot_sliding: ArrayLike = PRESSING) -> np.ndarray:
         """Downward force on a rigid support holding the foot at foot_height_m (from neutral, positive up).
 
         Negative means the leg would pull away. nan where that height is outside the linkage's range.
+        With friction_mu > 0 it is the vertical reading of a flat support with Coulomb friction, the foot sliding
+        `foot_sliding` (contact.py: +1 pressing down, -1 pushed up by the support); frictionless by default.
         """
         u = self.free_actuator_deflection_m(v_bias_V, v_drive_V)
         th = self.theta_at_height(foot_height_m)
         inside = (th >= self._theta_lo) & (th <= self._theta_hi)
         th_safe = np.where(inside, th, self.theta_neutral_rad)
         f = self._G(th_safe, u, 0.0) / tr.dfoot_height_dtheta(self.geometry, th_safe)
+        if np.any(np.asarray(friction_mu) != 0):
+            f = f * friction_reading_ratio(self.leg_angle_rad(th_safe), friction_mu, foot_sliding)
         return self._out(np.where(inside, f, np.nan))
 
-    def blocked_force_N(self, voltage_V: ArrayLike, sag_m: ArrayLike = 0.0) -> np.ndarray:
+    def blocked_force_N(self, voltage_V: ArrayLike, sag_m: ArrayLike = 0.0, friction_mu: ArrayLike = 0.0,
+                        foot_sliding: ArrayLike = PRESSING) -> np.ndarray:
         """Paper test: V_bias = V_drive = voltage, sensor raised by sag_m above the foot's undriven neutral."""
-        return self.foot_force_N(voltage_V, voltage_V, sag_m)
+        return self.foot_force_N(voltage_V, voltage_V, sag_m, friction_mu, foot_sliding)
+
+    def leg_angle_rad(self, theta_rad: ArrayLike) -> np.ndarray:
+        """Angle of the hip-to-foot line below horizontal at crank angle theta (contact.py's beta)."""
+        g = self.geometry
+        return g.leg_angle0_rad + np.asarray(theta_rad, dtype=float) - g.theta_fab_rad
 
     def free_foot_height_m(self, v_bias_V: ArrayLike, v_drive_V: ArrayLike) -> np.ndarray:
         """Foot height (from neutral, positive up) with nothing touching the foot."""

@@ -112,7 +112,8 @@ def _cycles(p: Params, mode: str, start_index: int, track: bool):
                 "voltage_V": voltage_V, "repetition": repetition, "mode": mode, "direction": "up"})
             yield SetVoltages(bias_V=voltage_V, drive_V=0.0)
             d = p.drive
-            yield Drive(tuple(trapezoid_V(voltage_V, d.ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
+            ramp_s = d.ramp_for(repetition, 1)
+            yield Drive(tuple(trapezoid_V(voltage_V, ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
                                           d.sample_rate_Hz)), d.sample_rate_Hz, track=track)
             index += 1
     return index

@@ -53,7 +53,8 @@ def plan(p: Params):
                 "voltage_V": voltage_V, "sag_m": 0.0, "repetition": repetition, "direction": direction})
             yield SetVoltages(bias_V=voltage_V, drive_V=0.0)
             d = p.drive
-            yield Drive(tuple(trapezoid_V(voltage_V, d.ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
+            ramp_s = d.ramp_for(repetition, 2 if p.alternate_direction else 1)
+            yield Drive(tuple(trapezoid_V(voltage_V, ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
                                           d.sample_rate_Hz)), d.sample_rate_Hz)
             index += 1
     yield SetVoltages(bias_V=0.0, drive_V=0.0)

@@ -25,10 +25,23 @@ class DriveParams:
     cycles: int = 3
     sample_rate_Hz: float = 1000.0
     settle_s: float = 0.2
+    # A second ramp rate on alternate repetitions (0: one rate): on one ramp rate a timing lag and
+    # rate-independent hysteresis delay the ramps alike; a lag scales with the ramp's slope, hysteresis does not.
+    slow_ramp_s: float = 0.15
+
+    def ramp_for(self, repetition: int, period: int = 1) -> float:
+        """The ramp of a repetition: `slow_ramp_s` on every other block of `period` repetitions (a protocol that
+        alternates its sweep direction passes 2, so both directions see both rates)."""
+        if self.slow_ramp_s > 0 and (repetition // max(period, 1)) % 2 == 1:
+            return self.slow_ramp_s
+        return self.ramp_s
 
     def validate(self) -> None:
         # The same checks the waveform generator makes, up front: a bad drive must not surface only after the
         # contact search.
+        if self.slow_ramp_s < 0:
+            raise ConfigError(f"drive slow_ramp_s: expected 0 (one ramp rate) or a positive time, got "
+                              f"{self.slow_ramp_s!r}")
         if not self.ramp_s > 0:
             raise ConfigError(f"drive ramp_s: must be positive (a step excites the actuator resonance), "
                               f"got {self.ramp_s!r}")

@@ -48,7 +48,8 @@ def plan(p: Params):
             yield Step(index, f"sag {sag_m * 1e3:.1f} mm, rep {repetition + 1}/{p.repetitions}", {
                 "voltage_V": p.voltage_V, "sag_m": sag_m, "repetition": repetition, "direction": "up"})
             d = p.drive
-            yield Drive(tuple(trapezoid_V(p.voltage_V, d.ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
+            ramp_s = d.ramp_for(repetition, 1)
+            yield Drive(tuple(trapezoid_V(p.voltage_V, ramp_s, d.dwell_high_s, d.dwell_low_s, d.cycles,
                                           d.sample_rate_Hz)), d.sample_rate_Hz)
             index += 1
         yield MoveStage(zero_sag_m)

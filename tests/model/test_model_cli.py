@@ -33,21 +33,33 @@ def test_model_leg_tests(capsys):
     assert set(out["points"][0]) == {"force_N", "displacement_m"} and out["points"][0]["displacement_m"] > 0
 
 
-def test_paper_json_keys(capsys):
-    out = _json(["paper", "--json"], capsys)
-    assert len(out["claims"]) >= 10
+def test_paper_json_carries_kind_margin_band_reproduced(capsys):
+    out = _json(["paper", "--json", "--samples", "8"], capsys)
+    assert out["kappa_units"] == "nmm" and out["samples"] == 8
+    assert len(out["claims"]) >= 15
     for c in out["claims"]:
-        assert {"id", "claim", "paper", "model", "reproduced", "margin"} <= set(c)
+        assert {"id", "claim", "paper", "model", "kind", "margin", "band", "reproduced"} <= set(c)
+        assert c["reproduced"] in (True, False, "indeterminate")
+    assert {"printed", "nmm", "mixed"} == set(out["readings"])
+
+
+def test_paper_kappa_units_flag_changes_the_reading(capsys):
+    out = _json(["paper", "--json", "--samples", "4", "--kappa-units", "printed"], capsys)
+    assert out["kappa_units"] == "printed"
+    assert "kappa units: printed" in out["summary"]
 
 
 def test_paper_markdown(capsys):
-    assert main(["paper", "--markdown"]) == 0
-    assert capsys.readouterr().out.startswith("# Paper reproduction")
+    assert main(["paper", "--markdown", "--samples", "4"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("# Paper reproduction") and "## Kappa readings" in text
 
 
 @pytest.mark.parametrize("argv,needle", [
     (["model", "actuator", "--voltage", "300"], "--voltage 300 V exceeds the configured limit 250 V"),
     (["model", "leg", "--design", "4", "--test", "blocked-force", "--voltage", "251"], "limit 250 V"),
+    (["model", "leg", "--design", "4", "--test", "blocked-force", "--friction-mu", "1.5"], "--friction-mu"),
+    (["paper", "--samples", "0"], "--samples must be at least 1"),
 ])
 def test_bad_input_is_one_line(argv, needle):
     r = subprocess.run([sys.executable, "-m", "hamr_bench", *argv], capture_output=True, text=True)

@@ -44,8 +44,9 @@ def test_drive_pushes_foot_down_and_into_the_support(pts, d):
 
 @pytest.mark.parametrize("d", [1, 2, 3, 4])
 def test_force_is_paper_eq4(pts, d):
-    """F R_tra = A F_act - A k_act delta_tra - sum kappa_i Phi_i dPhi_i/d delta_tra, from the kinematics alone."""
-    p = pts[d]
+    """F R_tra = A F_act - A k_act delta_tra - sum kappa_i Phi_i dPhi_i/d delta_tra, from the kinematics alone
+    (the paper's linear serial compliance: coupler strips that never buckle)."""
+    p = Powertrain(pts[d].actuator, replace(pts[d].design, coupler_buckling=False))
     g, c = p.geometry, p.coupler_m
     vb, vd = 220.0, 190.0
     h = np.linspace(-0.5e-3, 2e-3, 6)
@@ -66,6 +67,48 @@ def test_force_is_energy_gradient(pts, d):
     e = 1e-8
     fd = (p.energy_J(p.theta_at_height(h + e), u) - p.energy_J(p.theta_at_height(h - e), u)) / (2 * e)
     assert np.allclose(p.foot_force_N(250.0, 250.0, h), fd, rtol=1e-5, atol=1e-9)
+
+
+@pytest.mark.parametrize("d", [1, 3])
+def test_buckled_chain_generalises_eq4(d):
+    """With buckling the serial term A k_act (u - delta_tra) becomes the chain force; nothing else changes."""
+    p = powertrain(d, flexure_length_m=200e-6, flexure_width_m=1.5e-3)
+    g, c = p.geometry, p.coupler_m
+    h = np.linspace(0.0, 3e-3, 7)
+    th = p.theta_at_height(h)
+    gap = float(p.free_actuator_deflection_m(250.0, 250.0)) - tr.delta_tra_m(g, c, th)
+    assert np.any(gap > p.serial_chain.buckling_gap_m)      # the path does buckle the strips
+    flex = np.sum(p.kappa[:, None] * tr.joint_angles_rad(g, c, th) * tr.joint_dangles_ddelta_tra(g, c, th), axis=0)
+    rhs = p.serial_chain.force_N(gap) - flex
+    assert np.allclose(p.blocked_force_N(250.0, h) * tr.transmission_ratio(g, c, th), rhs, rtol=1e-9, atol=1e-12)
+    assert np.allclose(p.coupler_force_N(250.0, 250.0, h), p.serial_chain.force_N(gap), rtol=1e-12)
+
+
+def test_power_balance_with_buckled_strips():
+    """Piezo work = actuator spring + serial spring + the two strips' elastica energy + flexures + work on the leg,
+    with every internal deflection resolved explicitly and the strips' energy integrated from their own
+    load-shortening law (not from the chain's energy)."""
+    p = powertrain(3, flexure_length_m=200e-6, flexure_width_m=1.5e-3)
+    a, strip = p.actuator, p.design.flexure_strip
+    ka, ks = a.stiffness_N_per_m, p.k_ser_N_per_m
+    s = np.linspace(0.0, 1.0, 20001)
+    h = 3e-3 - 3e-3 * s
+    vd, vb = 125.0 + 125.0 * s, 250.0
+    th = p.theta_at_height(h)
+    u = p.free_actuator_deflection_m(vb, vd)
+    F = p.serial_chain.force_N(u - tr.delta_tra_m(p.geometry, p.coupler_m, th))
+    assert F.max() > 1.05 * strip.euler_load_N
+    Fp = a.tip_force_N(vb, vd, 0.0)
+    dact = u - F / ka                                    # actuator tip deflection toward the hip
+    short = strip.shortening_m(F)                        # each strip
+    def trap(y, x):
+        return np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(x))])
+    strips = 2 * trap(np.where(short > 0, F, 0.0), short)
+    phi = tr.joint_angles_rad(p.geometry, p.coupler_m, th)
+    stored = 0.5 * ka * dact**2 + 0.5 * F**2 / ks + strips + 0.5 * np.sum(p.kappa[:, None] * phi**2, axis=0)
+    W_act = trap(Fp, dact)[-1]
+    W_leg = trap(p.foot_force_N(vb, vd, h), -h)[-1]
+    assert W_act == pytest.approx(stored[-1] - stored[0] + W_leg, rel=2e-4)
 
 
 @pytest.mark.parametrize("d", [2, 4])
@@ -91,7 +134,8 @@ def test_power_balance_conserves_energy_along_quasi_static_path(pts, d):
     phi = tr.joint_angles_rad(p.geometry, p.coupler_m, th)
     stored = 0.5 * ka * dact**2 + 0.5 * ks * (dtra - dact) ** 2 + 0.5 * np.sum(p.kappa[:, None] * phi**2, axis=0)
     F = p.foot_force_N(vb, vd, h)
-    trap = lambda y, x: float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
+    def trap(y, x):
+        return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x)))
     W_act = trap(Fp, dact)                 # piezo force through the actuator tip's own travel
     W_leg = trap(F, -h)                    # foot pushes down with F while moving down by -dh
     # the piezo force is a function of the drive, not a potential: its work is exact only as the line integral

@@ -480,6 +480,10 @@ def kill_and_recover(protocol: str, tmp: Path, reference: dict[str, list[bytes]]
     # Every message recovered is the reference's, in order (a prefix per topic).
     mismatched = {}
     for topic, messages in got.items():
+        if topic == "/log":
+            # foxglove.Log repeats each /events record with an absolute timestamp (the two runs started at different
+            # wall times); /events, compared here, holds the same records with run-relative times
+            continue
         ref = reference.get(topic, [])
         for i, payload in enumerate(messages):
             if i >= len(ref) or payload != ref[i]:

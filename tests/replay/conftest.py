@@ -11,7 +11,7 @@ from hamr_bench.protocols.session import RunRequest, run_protocol
 
 SHORT = ["repetitions=2", "voltages_V=150,250", "drive.cycles=1", "drive.dwell_high_s=0.2", "drive.dwell_low_s=0.2"]
 SOURCE_SEED = 3
-SOURCE_EFFECTS = {"hysteresis": 0.1}
+SOURCE_EFFECTS = {"amplifier_gain_error": 0.12}
 
 
 def record(out: Path, protocol: str = "blocked-force", options=SHORT, seed: int = SOURCE_SEED,

@@ -1,0 +1,84 @@
+"""The gap diagnosis, stage by stage: fit the nominal model with each specimen's gains under the tolerance prior
+and every nuisance (fit before you diagnose), map where the rest of the gap lies (`residuals`), screen each
+candidate family alone (`screening`), name effects by forward selection on held-out conditions (`ranking`), and
+decide what each named effect means (`verdict`)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from analysis.gap import residuals as res
+from analysis.gap.families import CANDIDATES, FAMILIES
+from analysis.gap.features import GapData
+from analysis.gap.heldout import Judge
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.ranking import select
+from analysis.gap.results import Diagnosis
+from analysis.gap.screening import screen
+from analysis.gap.verdict import decide
+
+GAP_ALPHA = 1e-3
+
+
+def applicable(p: Problem, names: Sequence[str]) -> list[str]:
+    """The candidates this data can show at all: leg effects need leg runs, stage effects stage moves, drive
+    effects driven rows, force-side effects force rows."""
+    fixtures = {e.run.fixture for e in p.engines}
+    has_force = any(r.quantity == "force_N" for r in p.rows)
+    driven = any(r.phase != "hold" for r in p.rows)
+    stage = any(e.run.stage_cmd[0].size > 1 for e in p.engines)
+    out = []
+    for n in names:
+        kind = FAMILIES[n].kind
+        if (kind == "design" and "leg" not in fixtures) or (kind == "stage" and not stage) \
+                or (kind == "drive" and not driven) or (kind in ("contact", "baseline") and not has_force):
+            continue
+        out.append(n)
+    return out
+
+
+def nominal_fit(p: Problem) -> Fit:
+    return p.solve((), p.initial_nuisances(), max_nfev=100)
+
+
+def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
+    """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), and its prior score."""
+    out = {}
+    for g in p.groups:
+        a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
+        score = float(np.linalg.norm(p._whiten[g] @ np.array([a, b])))
+        out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
+    return out
+
+
+def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence[str] | None = None,
+             seed: int = 0) -> Diagnosis:
+    t0 = time.perf_counter()
+    p = Problem(data, fit_params)
+    names = applicable(p, list(candidates or CANDIDATES))
+    nominal = nominal_fit(p)
+    lack = res.global_test(p, nominal.z, len(nominal.layout.params))
+    gap = lack["p_value"] < GAP_ALPHA
+    where = [g.to_json() for g in res.regions(p, nominal.z)]
+    screened, _ = screen(p, nominal, names) if gap else ([], {})
+    judge = Judge(p, seed)
+    sel = select(p, nominal, screened, judge, gap)
+    named, best, cannot = decide(p, sel, judge)
+    final = sel.fits[-1]
+    last = sel.steps[-1]
+    unexplained = {"heldout_rms": last.heldout.rms, "heldout_rms_ci95": list(last.heldout.ci95),
+                   "at_noise_floor": bool(last.heldout.ci95[0] <= 1.0),
+                   "lack_of_fit_p": res.global_test(p, final.z, len(final.layout.params))["p_value"],
+                   "closed_fraction": last.closed_fraction}
+    lags = {"/".join(q.key): final.value("lag", *q.key) for q in final.layout.params if q.kind == "lag"}
+    diag = Diagnosis(where=where, gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
+                     specimens=specimen_table(p, nominal), screening=screened, waterfall=sel.steps, named=named,
+                     best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
+                     ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
+                     recordings=data.provenance() if hasattr(data, "provenance") else [])
+    diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
+    return diag

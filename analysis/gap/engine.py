@@ -1,0 +1,387 @@
+"""Predictions of one run's phase rows (`features.RunTrace`) from the nominal model, a specimen's gains, the
+session's nuisances and any set of candidate effects (`families.py`), evaluated on exactly the drive the run
+had (its commanded or inferred timelines).
+
+The drive path, on a uniform grid of DENSE_DT_S:
+
+    plate voltages V_drive, V_bias - V_drive -> d31(E) map -> effective net drive p -> PI hysteresis -> creep
+
+then the quasi-static model at the sensor's sample times (minus the sensor chain's lag): the bare actuator's
+closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at 0 for a
+sensor that reads only push) or the powertrain (leg). The force baseline (drift) is added linearly by `Problem`.
+Strength 0 of every candidate is the nominal model exactly (the same path, the operators skipped)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from analysis.gap import operators as op
+from analysis.gap import tolerances as tol
+from analysis.gap.families import FAMILIES
+from hamr_bench.errors import HamrBenchError
+from hamr_bench.model import ActuatorParams, DesignParams, Powertrain, actuator_preset, design_preset
+from hamr_bench.model import actuator as act
+from hamr_bench.model.effects import Effect
+
+FULL_SCALE_V = 250.0
+DENSE_DT_S = 1e-3
+MEMO_ARRAYS = 10
+REFERENCE_ACTUATOR = actuator_preset(2, "effective")
+MEMO_ITEMS = 400
+
+
+@dataclass(frozen=True)
+class EffectValue:
+    """One active candidate: its strength and shape parameters (defaults where not given)."""
+
+    strength: float
+    shapes: dict[str, float] = field(default_factory=dict)
+
+    def shape(self, name: str, family_name: str) -> float:
+        return float(self.shapes.get(name, FAMILIES[family_name].shapes[name].default))
+
+
+Effects = dict[str, EffectValue]
+
+
+@dataclass(frozen=True)
+class RunNuisance:
+    """What one run's prediction needs besides the effects: its specimen gains (log d31, log width), its
+    session's contact shift (m; how much further in the sensor surface sits than the run's zero says) and the
+    lag of each sensor chain (s)."""
+
+    gains: tuple[float, float] = (0.0, 0.0)
+    shift_m: float = 0.0
+    lag_s: dict[str, float] = field(default_factory=dict)
+
+
+def _zoh(t_cmd: np.ndarray, v_cmd: np.ndarray, t: np.ndarray, before: float = 0.0) -> np.ndarray:
+    if t_cmd.size == 0:
+        return np.full(t.shape, before)
+    i = np.searchsorted(t_cmd, t, "right") - 1
+    return np.where(i >= 0, v_cmd[np.clip(i, 0, None)], before)
+
+
+def base_params(run: Any, fit_params: dict | None = None) -> tuple[ActuatorParams, DesignParams | None]:
+    """The nominal actuator and design of a run: the presets the recording names (layers, design, parameter set),
+    then a fit's values if given. The recording's `model_params` are NOT used: on the simulated bench they are
+    the bench's truth, and the diagnosis must not see the answer."""
+    a = actuator_preset(run.layers, run.params_set if run.params_set in ("reported", "effective") else "effective")
+    d = design_preset(run.design) if run.fixture == "leg" and run.design else None
+    if fit_params:
+        a, d = _apply_fit(a, d, run, fit_params)
+    return a, d
+
+
+def _value(entry: Any) -> float:
+    return float(entry["value"] if isinstance(entry, dict) else entry)
+
+
+def _apply_fit(a: ActuatorParams, d: DesignParams | None, run: Any, fit: dict
+               ) -> tuple[ActuatorParams, DesignParams | None]:
+    acts = fit.get("actuators", {}) or {}
+    entry = acts.get(str(run.layers)) or acts.get(run.layers)
+    if entry:
+        names = {"E_p": "pzt_modulus_Pa", "d31": "d31_m_per_V", "t_p": "pzt_thickness_m", "length": "length_m",
+                 "width": "width_nom_m", "t_c": "cf_thickness_m"}
+        fitted: dict[str, Any] = {f: _value(entry[k]) for k, f in names.items() if k in entry}
+        a = dataclasses.replace(a, **fitted)
+    designs = fit.get("designs", {}) or {}
+    entry = (designs.get(str(run.design)) or designs.get(run.design)) if d is not None else None
+    if entry and d is not None:
+        changes: dict[str, Any] = {}
+        if "k_ser" in entry:
+            changes["k_ser_N_per_m"] = _value(entry["k_ser"])
+        if "bias" in entry:
+            changes["bias_m"] = _value(entry["bias"])
+        kap = list(d.kappa_N_m_per_rad)
+        for i in range(3):
+            if f"kappa_{i + 1}" in entry:
+                kap[i] = _value(entry[f"kappa_{i + 1}"])
+        changes["kappa_N_m_per_rad"] = tuple(kap)
+        d = dataclasses.replace(d, **changes)
+    return a, d
+
+
+@dataclass(frozen=True)
+class _SerialSpring(Effect):
+    """A linear base spring of compliance `strength` (m/N) in series with the leg's transmission."""
+
+    name: str = "base_compliance"
+
+    def serial_stiffness(self, k_ser_N_per_m: float, actuator: ActuatorParams) -> float:
+        return 1.0 / (1.0 / k_ser_N_per_m + self.strength)
+
+
+class RunEngine:
+    """Predictions for one run's rows under any effects and nuisances."""
+
+    def __init__(self, run: Any, fit_params: dict | None = None) -> None:
+        self.run = run
+        self.rows = run.rows
+        self.actuator, self.design = base_params(run, fit_params)
+        self.n_rows = len(self.rows)
+        self.is_force_row = np.array([r.quantity == "force_N" for r in self.rows], dtype=bool)
+        self.reads_pull = bool(getattr(run, "force_reads_pull", False))
+        t, row_of, cyc, rt, rrow, rcyc = [], [], [], [], [], []
+        for i, r in enumerate(self.rows):
+            t.append(r.eval_times_s)
+            row_of.append(np.full(r.eval_times_s.size, i))
+            cyc.append(r.eval_cycle if r.eval_cycle is not None else np.zeros(r.eval_times_s.size, int))
+            if r.ref_times_s is not None:
+                rt.append(r.ref_times_s)
+                rrow.append(np.full(r.ref_times_s.size, i))
+                rcyc.append(r.ref_cycle if r.ref_cycle is not None else np.zeros(r.ref_times_s.size, int))
+        self.t = np.concatenate(t) if t else np.empty(0)
+        self.row_of = np.concatenate(row_of) if row_of else np.empty(0, int)
+        cyc_all = np.concatenate(cyc) if cyc else np.empty(0, int)
+        self.rt = np.concatenate(rt) if rt else np.empty(0)
+        self.rrow = np.concatenate(rrow) if rrow else np.empty(0, int)
+        rcyc_all = np.concatenate(rcyc) if rcyc else np.empty(0, int)
+        self.eval_is_force = self.is_force_row[self.row_of] if self.row_of.size else np.empty(0, bool)
+        self._w = self._weights(self.row_of, cyc_all)
+        self._rw = self._weights(self.rrow, rcyc_all) if self.rt.size else None
+        tb, _ = run.bias_cmd
+        td, _ = run.drive_cmd
+        t_all = np.concatenate([self.t, self.rt]) if self.rt.size else self.t
+        starts = [float(x[0]) for x in (tb, td) if x.size] + ([float(t_all.min())] if t_all.size else [0.0])
+        t_first = min(starts)
+        t_last = float(t_all.max()) if t_all.size else t_first
+        self.dense_t = np.arange(t_first - DENSE_DT_S, t_last + 0.1, DENSE_DT_S)
+        self.dense_vb = _zoh(run.bias_cmd[0], run.bias_cmd[1], self.dense_t)
+        self.dense_vd = _zoh(run.drive_cmd[0], run.drive_cmd[1], self.dense_t)
+        self._cache: OrderedDict[Any, Any] = OrderedDict()
+        self._big_keys: list[Any] = []
+
+    def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
+        """Per sample time, its weight in the row's mean of cycle means."""
+        if row_of.size == 0:
+            return np.empty(0)
+        key = row_of * 10000 + cyc
+        uniq, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+        n_cyc = np.zeros(self.n_rows)
+        np.add.at(n_cyc, uniq // 10000, 1)
+        return 1.0 / counts[inv] / n_cyc[row_of]
+
+    def _row_mean(self, values: np.ndarray, row_of: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return np.bincount(row_of, weights=values * w, minlength=self.n_rows)
+
+    def row_means(self, values: np.ndarray) -> np.ndarray:
+        """Mean of cycle means per row of any per-sample quantity at `self.t`."""
+        return self._row_mean(values, self.row_of, self._w)
+
+    # --- the drive path -----------------------------------------------------------------------------------
+    def _memo(self, key: Any, make: Any) -> Any:
+        """Least-recently-used memo: arrays on the dense grid (up to MEMO_ARRAYS of them: a native run's grid is
+        ~10^5 samples) and small values (parameters, Powertrains) apart."""
+        v = self._cache.get(key)
+        if v is not None:
+            self._cache.move_to_end(key)
+            return v
+        v = self._cache[key] = make()
+        big = isinstance(v, np.ndarray) and v.size > 1000
+        if big:
+            self._big_keys.append(key)
+        while len(self._big_keys) > MEMO_ARRAYS:
+            self._cache.pop(self._big_keys.pop(0), None)
+        while len(self._cache) > MEMO_ITEMS:
+            old, _ = self._cache.popitem(last=False)
+            if old in self._big_keys:
+                self._big_keys.remove(old)
+        return v
+
+    def _net_drive(self, d31: EffectValue | None, t_p: float) -> np.ndarray:
+        """p = g(V_drive) - g(V_bias - V_drive) on the dense grid (V; g the identity nominally)."""
+        vb, vd = self.dense_vb, self.dense_vd
+        if d31 is None or d31.strength == 0:
+            return 2.0 * vd - vb
+        q = d31.shape("curvature", "field_dependent_d31")
+        ref = self.actuator.pzt_thickness_m
+        return (op.plate_map(vd, t_p, d31.strength, q, ref) - op.plate_map(vb - vd, t_p, d31.strength, q, ref))
+
+    def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
+        """The effective net drive on the dense grid after d31(E), hysteresis and creep (V)."""
+        key = ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
+                                  if FAMILIES[n].kind == "drive")
+        return self._memo(key, lambda: self._effective_drive(effects, t_p))
+
+    def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
+        d31 = effects.get("field_dependent_d31")
+        hy = effects.get("hysteresis")
+        cr = effects.get("creep")
+        d_key = (None if d31 is None or d31.strength == 0 else (d31.strength, d31.shape("curvature",
+                                                                                          "field_dependent_d31")),
+                 t_p if d31 is not None and d31.strength != 0 else None)
+        p = self._memo(("p",) + d_key, lambda: self._net_drive(d31, t_p))
+        y = p
+        if hy is not None and hy.strength != 0:
+            gamma = hy.shape("density_exponent", "hysteresis")
+            dev = self._memo(("dev",) + d_key, lambda: op.pi_deviations(p / FULL_SCALE_V))
+            w = op.pi_weights(hy.strength, gamma)
+            y = (p - FULL_SCALE_V * (w @ dev)) / op.pi_full_drive_gain(w)
+        if cr is not None and cr.strength != 0:
+            n = cr.shape("exponent", "creep")
+            h_key = None if hy is None or hy.strength == 0 else (hy.strength, hy.shape("density_exponent",
+                                                                                        "hysteresis"))
+            base = y
+            resp = self._memo(("creep", n, h_key) + d_key, lambda: op.creep_response(base, DENSE_DT_S, n))
+            y = y + cr.strength * resp
+        return y
+
+    # --- parameters ---------------------------------------------------------------------------------------
+    def actuator_for(self, effects: Effects, gains: tuple[float, float]) -> ActuatorParams:
+        key = ("a", gains) + tuple((n, v.strength) for n, v in sorted(effects.items()) if FAMILIES[n].kind == "params")
+        return self._memo(key, lambda: self._actuator_for(effects, gains))
+
+    def _actuator_for(self, effects: Effects, gains: tuple[float, float]) -> ActuatorParams:
+        a = self.actuator
+        for name, value in effects.items():
+            if FAMILIES[name].kind == "params" and value.strength != 0:
+                a = tol.scaled(a, name, value.strength)
+        return tol.with_gains(a, gains[0], gains[1])
+
+    def surface_at(self, t: np.ndarray, backlash_m: float) -> np.ndarray:
+        """Stage carriage position relative to the run's contact position (play on the target sequence)."""
+        ts, xs = self.run.stage_cmd
+        if ts.size == 0:
+            return np.zeros(t.shape)
+        x = xs
+        if backlash_m != 0:
+            # the contact search's last move backed off (away), so the carriage sits half the play in
+            x = op.play(np.r_[xs[0] + backlash_m, xs], backlash_m / 2.0)[1:]
+        pos = _zoh(ts, x, t, before=x[0])
+        tc = self.run.t_contact_s
+        ref = float(_zoh(ts, x, np.array([tc]), before=x[0])[0]) if tc is not None else float(x[0])
+        return pos - ref
+
+    def _springs(self, effects: Effects) -> list[tuple[float, float, float]]:
+        """(C, beta, rho) of the active series springs: the sensor's strength is its compliance, the base's the
+        blocked-force loss it causes on the reference actuator at 250 V (`base_compliance_m_per_N`)."""
+        out = []
+        for name in ("base_compliance", "sensor_compliance"):
+            e = effects.get(name)
+            if e is not None and e.strength != 0:
+                beta = e.shape("exponent", name)
+                c = base_compliance_m_per_N(e.strength, beta) if name == "base_compliance" else e.strength
+                out.append((c, beta, e.shape("pull_ratio", name)))
+        return out
+
+    # --- the prediction -----------------------------------------------------------------------------------
+    def _values(self, t: np.ndarray, is_force: np.ndarray, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+        a = self.actuator_for(effects, nuis.gains)
+        lag = np.where(is_force, nuis.lag_s.get("force_N", 0.0), nuis.lag_s.get("displacement_m", 0.0))
+        te = t - lag
+        y = np.interp(te, self.dense_t, self.effective_drive(effects, a.pzt_thickness_m))
+        backlash = effects.get("stage_backlash")
+        b = backlash.strength if backlash is not None else 0.0
+        out = np.zeros(t.shape)
+        if self.run.fixture == "actuator":
+            c, k = self._memo(("ck", a), lambda: (act.force_per_volt(a), act.stiffness_N_per_m(a)))
+            d = ~is_force
+            out[d] = c / k * y[d]
+            if is_force.any():
+                f0 = c * y[is_force] + k * (self.surface_at(te[is_force], b) + nuis.shift_m)
+                f = op.spring_solve_many(f0, k, self._springs(effects))
+                out[is_force] = f if self.reads_pull else np.maximum(f, 0.0)
+            return out
+        return self._leg_values(a, effects, y, te, is_force, nuis, b)
+
+    def _leg_values(self, a: ActuatorParams, effects: Effects, y: np.ndarray, te: np.ndarray, is_force: np.ndarray,
+                    nuis: RunNuisance, backlash_m: float) -> np.ndarray:
+        d = self.design
+        assert d is not None  # a leg run always has its design (RunEngine reads it from the recording)
+        bias = effects.get("bias_error")
+        if bias is not None and bias.strength != 0:
+            d = dataclasses.replace(d, bias_m=d.bias_m + bias.strength)
+        base = effects.get("base_compliance")
+        extra = [_SerialSpring(strength=base_compliance_m_per_N(base.strength, 1.0))] \
+            if base is not None and base.strength != 0 else []
+        key = ("pt", a, d, tuple(e.strength for e in extra))
+        p: Powertrain = self._memo(key, lambda: Powertrain(a, d, extra))
+        out = np.zeros(te.shape)
+        half = np.clip(y / 2.0, -FULL_SCALE_V, FULL_SCALE_V)
+        zero = np.zeros(te.shape)
+        m = ~is_force
+        if m.any():
+            out[m] = -p.free_foot_height_m(zero[m], half[m])
+        if is_force.any():
+            h = self.surface_at(te[is_force], backlash_m) + nuis.shift_m
+            f = p.foot_force_N(zero[is_force], half[is_force], h)
+            sensor = effects.get("sensor_compliance")
+            if sensor is not None and sensor.strength != 0:
+                dh = 2e-6
+                kc = (p.foot_force_N(zero[is_force], half[is_force], h - dh)
+                      - p.foot_force_N(zero[is_force], half[is_force], h + dh)) / (2 * dh)
+                f = f / (1.0 + sensor.strength * np.maximum(np.nan_to_num(kc), 0.0))
+            f = np.nan_to_num(f)
+            out[is_force] = f if self.reads_pull else np.maximum(f, 0.0)
+        return out
+
+    def predict(self, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+        """Model value per row (mean of cycle means over the row's sample times, minus the camera reference).
+        Raises HamrBenchError where the effects put the linkage beyond its reach."""
+        v = self._values(self.t, self.eval_is_force, effects, nuis)
+        out = self._row_mean(v, self.row_of, self._w)
+        if self._rw is not None:
+            r = self._values(self.rt, np.zeros(self.rt.size, bool), effects, nuis)
+            out -= self._row_mean(r, self.rrow, self._rw)
+        return out
+
+    def safe_predict(self, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+        try:
+            out = self.predict(effects, nuis)
+        except (HamrBenchError, FloatingPointError, ValueError):
+            return np.full(self.n_rows, np.nan)
+        return out
+
+    # --- the drift baseline (linear) -----------------------------------------------------------------------
+    def drift_basis(self, log10_tau_s: float, knot_s: float = 4.0) -> np.ndarray:
+        """Columns of this run's force baseline (rows x columns; 0 on camera rows): a cubic B-spline over the
+        run's force samples plus a warm-up from its first sample. Empty for a run without force rows."""
+        if not self.eval_is_force.any():
+            return np.zeros((self.n_rows, 0))
+        tf = self.t[self.eval_is_force]
+        t0, t1 = float(tf.min()), float(tf.max())
+        spline = op.spline_basis(self.t, t0, t1, max(knot_s, (t1 - t0) / 8.0))
+        warm = op.warm_up(self.t - t0, 10.0 ** log10_tau_s)
+        cols = np.column_stack([spline, warm])
+        out = np.array([self.row_means(cols[:, j]) for j in range(cols.shape[1])]).T
+        out[~self.is_force_row] = 0.0
+        return out
+
+    def drift_wander(self, coefs: np.ndarray, log10_tau_s: float, knot_s: float = 4.0) -> tuple[float, float]:
+        """(sum of squared changes of the fitted baseline between points `knot_s` apart, time they span) over the
+        run's force samples: a random walk of rate q has E[sum] = q^2 x span, so q^2 = sum / span."""
+        if not self.eval_is_force.any() or coefs.size == 0:
+            return 0.0, 0.0
+        tf = self.t[self.eval_is_force]
+        t0, t1 = float(tf.min()), float(tf.max())
+        grid = np.linspace(t0, t1, max(2, int(round((t1 - t0) / knot_s)) + 1))
+        spline = op.spline_basis(grid, t0, t1, max(knot_s, (t1 - t0) / 8.0))
+        b = np.column_stack([spline, op.warm_up(grid - t0, 10.0 ** log10_tau_s)]) @ coefs
+        return float(np.sum(np.diff(b) ** 2)), t1 - t0
+
+    def has_contact(self) -> bool:
+        return bool(self.is_force_row.any()) and self.run.t_contact_s is not None
+
+
+def base_compliance_m_per_N(loss: float, exponent: float) -> float:
+    """The base spring's compliance for a strength given as the blocked-force loss it causes on the reference
+    actuator (2 layers, Table I effective values) at 250 V: a fixed conversion, so one strength means one spring
+    whatever actuator the data holds (a stiffer actuator loses more to the same spring)."""
+    a = REFERENCE_ACTUATOR
+    return op.compliance_for_loss(loss, act.stiffness_N_per_m(a), float(act.blocked_force_N(a, 250.0)), exponent)
+
+
+def spring_fraction(k_N_per_m: float, compliance: float) -> float:
+    """Blocked-force loss of a linear series spring: 1 - 1 / (1 + C k)."""
+    return 1.0 - 1.0 / (1.0 + compliance * k_N_per_m)
+
+
+__all__ = ["DENSE_DT_S", "FULL_SCALE_V", "EffectValue", "Effects", "RunEngine", "RunNuisance", "base_params",
+           "spring_fraction"]

@@ -1,0 +1,106 @@
+"""The candidate effects as FAMILIES: each fits its physical effect in a range of forms (shape parameters, fitted)
+with ONE strength in a physical unit. The forms are deliberately not the simulated bench's (docs/gap.md lists the
+pairs side by side; /work/coord/notes/forms.md is the partition):
+
+| candidate | family (shape parameters) | strength |
+|---|---|---|
+| hysteresis | generalised Prandtl-Ishlinskii on the effective net drive; threshold density ~ r^gamma |
+|   | (loop width grows as amplitude^(gamma + 2)) | loop gap at mid-swing / span, full drive |
+| creep | power-law (Nutting) superposition of every drive increment, exponent n; the log law at n = 0 |
+|   | | mean growth per decade, 10 ms - 100 s |
+| field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(250 V) / d31(100 V) - 1 |
+| base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
+| sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
+| width_loss | constant kerf per cut edge on the tapered plate | fraction of the mean width lost |
+| pzt_thickness, pzt_modulus, cf_thickness | the parameter scaled | fractional change |
+| grounding_lengthening | active length scaled, the rigid extension kept | fractional change |
+| sensor_drift | per run a penalised cubic spline plus a warm-up t / (t + tau) of the force baseline | N/sqrt(s) |
+| bias_error | coupler lengthening offset (leg) | m |
+| stage_backlash | play on the stage-target sequence | m (full width) |
+
+A strength of 0 is the nominal model exactly. Fabrication shifts (`TOLERANCE`) are effects only BEYOND the
+tolerance band of their parameter: within it they belong to the specimens' scatter (`tolerances.py`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from hamr_bench.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A shape parameter: fitted within [lo, hi], softly held near `default` (a Gaussian prior of `prior_sd`)
+    so that it stays defined when the strength is small."""
+
+    default: float
+    lo: float
+    hi: float
+    prior_sd: float
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    unit: str
+    bounds: tuple[float, float]
+    form: str
+    kind: str                      # drive | contact | params | baseline | design | stage
+    shapes: dict[str, Shape] = field(default_factory=dict)
+    tolerance: float = 0.0         # fabrication shifts: the parameter's 1-sigma tolerance (fraction)
+    scale: float = 1.0             # typical strength (finite-difference and solver scale)
+
+
+FAMILIES: dict[str, Family] = {f.name: f for f in (
+    Family("hysteresis", "loop gap at mid-swing / span, full drive (250 V)", (0.0, 0.3),
+           "generalised Prandtl-Ishlinskii (threshold density ~ r^gamma)", "drive",
+           {"density_exponent": Shape(0.0, -1.5, 1.5, 1.0)}, scale=0.05),
+    Family("creep", "mean growth per decade of time over 10 ms - 100 s (fraction of a step)", (0.0, 0.12),
+           "power-law superposition of drive increments (log law at n = 0)", "drive",
+           {"exponent": Shape(0.1, 0.0, 0.6, 0.3)}, scale=0.01),
+    Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),
+           "d31 gain polynomial in field (linear + quadratic, either sign)", "drive",
+           {"curvature": Shape(0.5, -1.0, 2.0, 1.0)}, scale=0.2),
+    Family("base_compliance", "blocked-force loss of the 2-layer actuator at 250 V", (0.0, 0.8),
+           "series spring at the actuator base, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
+           {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=0.1),
+    Family("sensor_compliance", "m/N (secant at 50 mN)", (0.0, 2e-3),
+           "series spring in the force sensor, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
+           {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=5e-5),
+    Family("width_loss", "fraction of the nominal mean width lost", (-0.2, 0.5),
+           "constant kerf per cut edge on the tapered plate", "params", tolerance=0.02, scale=0.1),
+    Family("pzt_thickness", "fractional change of the PZT plate thickness", (-0.3, 0.6),
+           "PZT plate thickness scaled", "params", tolerance=0.04, scale=0.1),
+    Family("pzt_modulus", "fractional change of the PZT modulus", (-0.6, 0.6),
+           "effective PZT modulus scaled", "params", tolerance=0.05, scale=0.1),
+    Family("grounding_lengthening", "fractional change of the active length", (-0.3, 0.5),
+           "active length scaled, the rigid extension kept (clamp line moved)", "params", tolerance=0.02,
+           scale=0.05),
+    Family("cf_thickness", "fractional change of the carbon-fibre layer thickness", (-0.7, 1.0),
+           "carbon-fibre layer thickness scaled", "params", tolerance=0.10, scale=0.2),
+    Family("sensor_drift", "N/sqrt(s) (baseline wander rate)", (0.0, math.inf),
+           "per-run force baseline: penalised cubic spline + warm-up t/(t + tau)", "baseline",
+           {"warmup_log10_tau_s": Shape(1.5, 0.5, 3.0, 1.0)}, scale=2e-5),
+    Family("bias_error", "m", (-150e-6, 150e-6), "coupler lengthening offset", "design", scale=20e-6),
+    Family("stage_backlash", "m", (0.0, 60e-6), "play on the stage-target sequence", "stage", scale=5e-6),
+)}
+CANDIDATES = tuple(FAMILIES)
+FABRICATION = tuple(n for n, f in FAMILIES.items() if f.kind == "params")
+
+
+def family(name: str) -> Family:
+    return FAMILIES[name]
+
+
+def check_names(names: list[str] | tuple[str, ...]) -> list[str]:
+    """Candidate names as given to `--effects`, checked (one line naming the unknown one)."""
+    out = []
+    for n in names:
+        n = n.strip()
+        if not n:
+            continue
+        if n not in FAMILIES:
+            raise ConfigError(f"--effects: unknown candidate effect {n!r} (known: {', '.join(FAMILIES)})")
+        out.append(n)
+    return out

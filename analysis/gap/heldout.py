@@ -1,0 +1,107 @@
+"""Held-out judgement: folds of whole conditions (replicates and a condition's specimens' phases stay together),
+each fold predicted by the model refitted without it, and bootstrap intervals over conditions.
+
+The refit without a fold is one Gauss-Newton step from the full-data optimum on the training rows (and every prior
+row), with the full fit's Jacobian: the standard linearised cross-validation, exact for a model linear in its
+parameters near the optimum and far cheaper than a nonlinear refit per fold. A specimen or session whose rows are
+all held out is then predicted from its prior (the population), as an unseen specimen would be."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.results import HeldOut
+
+N_FOLDS = 5
+N_BOOT = 400
+
+
+def condition_ids(p: Problem) -> np.ndarray:
+    """Condition index per row: (fixture, layers / design, mode, voltage, sag), shared by the specimens and runs
+    measured there, so a fold leaves a whole condition out for every specimen."""
+    keys = []
+    for r in p.rows:
+        run = p.data.runs[r.run]
+        keys.append((run.fixture, run.layers, run.design or 0, r.protocol, r.mode, round(r.voltage_V / 5.0),
+                     round(r.sag_m, 7)))
+    uniq = sorted(set(keys), key=str)
+    index = {k: i for i, k in enumerate(uniq)}
+    return np.array([index[k] for k in keys])
+
+
+def folds(p: Problem) -> list[np.ndarray]:
+    cid = condition_ids(p)
+    n = int(cid.max()) + 1 if cid.size else 0
+    k = min(N_FOLDS, max(n, 1))
+    out = [np.isin(cid, [i for i in range(n) if i % k == j]) for j in range(k)]
+    return [f for f in out if f.any() and not f.all()]
+
+
+def strata(p: Problem) -> np.ndarray:
+    """Stratum per row for the bootstrap: one experiment (fixture, mode): each resample keeps the plan."""
+    keys = [(p.data.runs[r.run].fixture, r.mode, r.quantity) for r in p.rows]
+    uniq = sorted(set(keys))
+    return np.array([uniq.index(k) for k in keys])
+
+
+def heldout_z(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Per row, its z when its fold was left out of the fit; and each fold's parameter step (for jackknives)."""
+    n = fit.layout.n_rows
+    r, j = fit.residual, fit.jac
+    out = np.zeros(n)
+    steps = []
+    for held in fold_masks:
+        train = np.r_[~held, np.ones(r.size - n, bool)]
+        jt = j[train]
+        step, *_ = np.linalg.lstsq(jt, -r[train], rcond=1e-10)
+        out[held] = r[:n][held] + j[:n][held] @ step
+        steps.append(step)
+    return out, steps
+
+
+def rms(v: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(v * v))) if v.size else 0.0
+
+
+def _boot_rows(cid: np.ndarray, sid: np.ndarray, rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    groups = [np.unique(cid[sid == k]) for k in np.unique(sid)]
+    idx_of = {c: np.flatnonzero(cid == c) for c in np.unique(cid)}
+    out = []
+    for _ in range(n):
+        pick = np.concatenate([rng.choice(g, g.size, replace=True) for g in groups])
+        out.append(np.concatenate([idx_of[c] for c in pick]))
+    return out
+
+
+class Judge:
+    """Held-out figures of any fit on one problem, with one fixed set of bootstrap resamples (so differences
+    between models are paired)."""
+
+    def __init__(self, p: Problem, seed: int = 0) -> None:
+        self.p = p
+        self.folds = folds(p)
+        cid, sid = condition_ids(p), strata(p)
+        self.resamples = _boot_rows(cid, sid, np.random.default_rng(seed), N_BOOT)
+
+    def z(self, fit: Fit) -> np.ndarray:
+        if "heldout_z" not in fit.extra:
+            fit.extra["heldout_z"], fit.extra["fold_steps"] = heldout_z(fit, self.folds)
+        return fit.extra["heldout_z"]
+
+    def heldout(self, fit: Fit) -> HeldOut:
+        z = self.z(fit)
+        boot = np.array([rms(z[r]) for r in self.resamples])
+        return HeldOut(rms(z), (float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))))
+
+    def reduction_ci(self, base: Fit, new: Fit) -> tuple[float, float]:
+        """Bootstrap 95 % interval of 1 - RMS(new) / RMS(base) on the held-out z (paired resamples)."""
+        zb, zn = self.z(base), self.z(new)
+        boot = np.array([1.0 - rms(zn[r]) / max(rms(zb[r]), 1e-300) for r in self.resamples])
+        return float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))
+
+    def difference_ci(self, a: Fit, b: Fit) -> tuple[float, float]:
+        """Bootstrap 95 % interval of mean(z_a^2) - mean(z_b^2) held out (paired)."""
+        za, zb = self.z(a), self.z(b)
+        boot = np.array([float(np.mean(za[r] ** 2) - np.mean(zb[r] ** 2)) for r in self.resamples])
+        return float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))

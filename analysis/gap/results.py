@@ -1,0 +1,145 @@
+"""Typed results of the diagnosis's stages (screen -> fit -> held-out -> rank -> verdict) and their JSON form
+(the shape `hamr-bench gap --json` prints; /work/coord/notes/gap.md and docs/gap.md describe it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from analysis.gap.families import FAMILIES
+
+
+@dataclass
+class Screened:
+    """One candidate fitted alone on top of the nominal fit (specimen gains and nuisances refitted)."""
+
+    name: str
+    strength: float
+    shapes: dict[str, float]
+    improvement: float            # objective(nominal) - objective(with it), noise units^2
+    threshold: float              # the likelihood-ratio threshold it had to pass (over-dispersion included)
+    promising: bool
+    start: dict[tuple, float] = field(repr=False, default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"effect": self.name, "strength": self.strength, "unit": FAMILIES[self.name].unit,
+                "shapes": dict(self.shapes), "improvement_chi2": self.improvement, "threshold_chi2": self.threshold,
+                "promising": self.promising}
+
+
+@dataclass
+class HeldOut:
+    """Held-out RMS z of a model (condition folds refitted without each fold), with its bootstrap interval."""
+
+    rms: float
+    ci95: tuple[float, float]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"rms": self.rms, "ci95": list(self.ci95)}
+
+
+@dataclass
+class StepCandidate:
+    """One candidate tried at a step of the forward selection (added to the effects named so far)."""
+
+    name: str
+    improvement: float            # in-sample objective decrease over the step's base model
+    heldout: HeldOut
+    reduction_ci95: tuple[float, float]   # of the held-out RMS relative to the base model
+    strength: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"effect": self.name, "improvement_chi2": self.improvement, "heldout": self.heldout.to_json(),
+                "reduction_ci95": list(self.reduction_ci95), "strength": self.strength}
+
+
+@dataclass
+class WaterfallStep:
+    """The held-out gap after adding `added` (with `ambiguous_with`, explanations this step could not tell
+    apart from it) to the effects above it."""
+
+    added: str | None             # None: the nominal model (the waterfall's first bar)
+    effects: tuple[str, ...]
+    heldout: HeldOut
+    closed_fraction: float        # of the nominal held-out gap above the noise floor, cumulative
+    ambiguous_with: tuple[str, ...] = ()
+    tried: list[StepCandidate] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"added": self.added, "effects": list(self.effects), "heldout_rms": self.heldout.rms,
+                "heldout_rms_ci95": list(self.heldout.ci95), "closed_fraction": self.closed_fraction,
+                "ambiguous_with": list(self.ambiguous_with), "tried": [c.to_json() for c in self.tried]}
+
+
+@dataclass
+class NamedEffect:
+    """An effect the diagnosis names, in waterfall order (by how much of the held-out gap it closes)."""
+
+    name: str
+    verdict: str                  # attributed | ambiguous | unexplained (named but the whole closes too little)
+    strength: float
+    strength_ci95: tuple[float, float]
+    shapes: dict[str, float]
+    heldout_before: float
+    heldout_after: float
+    reduction: float              # 1 - after / before of its own step
+    reduction_ci95: tuple[float, float]
+    closed_fraction: float        # its own step's share of the nominal held-out gap above noise
+    ambiguous_with: tuple[str, ...] = ()
+    separated_by: tuple[str, ...] = ()
+    beyond_tolerance: bool | None = None
+    notes: tuple[str, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return {"effect": self.name, "verdict": self.verdict, "strength": self.strength,
+                "unit": FAMILIES[self.name].unit, "strength_ci95": list(self.strength_ci95),
+                "shapes": dict(self.shapes), "heldout_rms_before": self.heldout_before,
+                "heldout_rms_after": self.heldout_after, "reduction": self.reduction,
+                "reduction_ci95": list(self.reduction_ci95), "closed_fraction": self.closed_fraction,
+                "confusable_with": list(self.ambiguous_with), "separated_by": list(self.separated_by),
+                "beyond_tolerance": self.beyond_tolerance, "notes": list(self.notes)}
+
+
+@dataclass
+class Diagnosis:
+    """Everything `diagnose` finds: where the gap is, what explains how much of it, what the data cannot tell."""
+
+    where: list[dict[str, Any]]
+    gap_above_noise: bool
+    nominal_lack_of_fit: dict[str, Any]
+    specimens: dict[str, Any]
+    screening: list[Screened]
+    waterfall: list[WaterfallStep]
+    named: list[NamedEffect]
+    best: str | None
+    unexplained: dict[str, Any]
+    cannot_separate: list[dict[str, Any]]
+    sensor_lag_s: dict[str, float]
+    ramp_rates_s: list[float]
+    elapsed_s: float
+    recordings: list[dict[str, Any]] = field(default_factory=list)
+    fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
+
+    def ranking(self) -> list[dict[str, Any]]:
+        """Named effects first (waterfall order), then every other candidate with its screening figures."""
+        out = [e.to_json() for e in self.named]
+        seen = {e.name for e in self.named}
+        for s in sorted(self.screening, key=lambda s: -s.improvement):
+            if s.name in seen:
+                continue
+            out.append({"effect": s.name, "verdict": "not named", "strength": s.strength,
+                        "unit": FAMILIES[s.name].unit, "strength_ci95": None, "shapes": dict(s.shapes),
+                        "heldout_rms_before": None, "heldout_rms_after": None, "reduction": None,
+                        "reduction_ci95": None, "closed_fraction": None, "confusable_with": [],
+                        "screen_improvement_chi2": s.improvement, "promising": s.promising})
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {"best": self.best, "ranking": self.ranking(), "named": [e.to_json() for e in self.named],
+                "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained,
+                "cannot_separate": self.cannot_separate, "where": self.where,
+                "gap_above_noise": self.gap_above_noise, "nominal_lack_of_fit": self.nominal_lack_of_fit,
+                "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
+                "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
+                "heldout_units": "noise units (z = residual / pure-error standard error); 1 = the noise floor",
+                "recordings": self.recordings, "elapsed_s": self.elapsed_s}

@@ -1,0 +1,115 @@
+"""Stage 4, verdict: what the waterfall's steps mean. Each named effect gets its strength with a 95 % interval
+from the final joint fit, its share of the held-out gap, and a verdict:
+
+- `attributed`: named alone at its step, and the named effects together close at least half of the nominal
+  held-out gap above the noise floor (CLOSED_MIN);
+- `ambiguous`: another explanation fitted as well at its step (the set is named, with the measurements that
+  would separate them), or its strength trades with a sensor chain's timing lag (|correlation| >= 0.95 in the
+  joint fit: on one ramp rate a lag and rate-independent hysteresis look alike);
+- `within tolerance`: a fabrication shift whose interval reaches into its parameter's tolerance band: specimen
+  scatter, not an effect;
+- `unexplained`: named, but everything named together closes less than half of the gap (a partial fit of
+  something outside the library).
+
+`best` is the first attributed effect in waterfall order, or null."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.gap import tolerances as tol
+from analysis.gap.families import FAMILIES
+from analysis.gap.heldout import Judge
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.ranking import Selection, strength_interval
+from analysis.gap.results import NamedEffect
+
+CLOSED_MIN = 0.5
+LAG_CORRELATION = 0.95
+
+# The measurement that isolates each effect (physics, not data): named for every member of an ambiguous set.
+SEPARATED_BY: dict[str, str] = {
+    "hysteresis": "a second ramp rate (a timing lag scales with the ramp's slope, rate-independent hysteresis does "
+                  "not) and partial (minor-loop) cycles",
+    "timing_lag": "a second ramp rate, or the drive command recorded with the sensors (no inferred timing)",
+    "creep": "longer dwells at constant drive (creep keeps growing over decades of time)",
+    "field_dependent_d31": "free displacement at more bias voltages (a d31 that changes with field bends the "
+                           "stroke-voltage line; a spring or a parameter shift does not)",
+    "base_compliance": "the camera on the actuator's base during blocked force (a base spring lets it rotate)",
+    "sensor_compliance": "a stiffness sweep with the camera on the tip (the sensor's spring shortens the travel the "
+                         "tip sees), or a second sensor of another stiffness",
+    "width_loss": "the plates' mean width measured under a microscope",
+    "pzt_thickness": "the plates' thickness measured, or actuators of other layer counts (a thicker plate "
+                     "changes their stiffness ratio)",
+    "pzt_modulus": "a resonance (or bending) test of a bare plate, or actuators of other layer counts",
+    "grounding_lengthening": "the free length past the clamp line measured, or the tip stroke at two points along the "
+                        "actuator",
+    "cf_thickness": "the cured laminate's thickness measured, or actuators of other layer counts",
+    "sensor_drift": "undriven holds between steps (the baseline moves while nothing is driven)",
+    "bias_error": "the leg's static (undriven) sag sweep and the coupler length measured",
+    "stage_backlash": "an undriven stiffness sweep loading and unloading against the actuator",
+}
+
+
+def beyond_tolerance(name: str, ci: tuple[float, float]) -> bool | None:
+    f = FAMILIES[name]
+    if f.kind != "params":
+        return None
+    b = tol.band(name, f.tolerance)
+    return bool(ci[0] > b or ci[1] < -b)
+
+
+def lag_ambiguity(p: Problem, fit: Fit, name: str) -> float:
+    """Largest |correlation| between the effect's strength and a sensor chain's lag in the joint fit."""
+    if ("strength", name) not in fit.layout.index:
+        return 0.0
+    cov = np.linalg.pinv(fit.jac.T @ fit.jac)
+    i = fit.layout.index[("strength", name)]
+    out = 0.0
+    for j, q in enumerate(fit.layout.params):
+        if q.kind == "lag" and cov[i, i] > 0 and cov[j, j] > 0:
+            out = max(out, abs(float(cov[i, j] / np.sqrt(cov[i, i] * cov[j, j]))))
+    return out
+
+
+def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect], str | None, list[dict]]:
+    final = sel.fits[-1]
+    rms0 = sel.steps[0].heldout.rms
+    total_closed = sel.steps[-1].closed_fraction
+    named: list[NamedEffect] = []
+    cannot: list[dict] = []
+    for k, step in enumerate(sel.steps[1:], start=1):
+        name = step.added
+        assert name is not None
+        before, after = sel.steps[k - 1].heldout.rms, step.heldout.rms
+        row = next(c for c in step.tried if c.name == name)
+        ci = strength_interval(p, final, name, judge)
+        value = final.effects[name]
+        ambiguous = list(step.ambiguous_with)
+        notes = []
+        if FAMILIES[name].kind == "drive" and len(p.ramp_rates) < 2:
+            rho = lag_ambiguity(p, final, name)
+            if rho >= LAG_CORRELATION:
+                ambiguous.append("timing_lag")
+                notes.append(f"strength and sensor lag correlate at {rho:.2f} on one ramp rate")
+        beyond = beyond_tolerance(name, ci)
+        if ambiguous:
+            verdict = "ambiguous"
+            members = [name] + ambiguous
+            cannot.append({"effects": members, "separated_by": {m: SEPARATED_BY.get(m, "") for m in members}})
+        elif beyond is False:
+            verdict = "within tolerance"
+        else:
+            verdict = "attributed"
+        if total_closed < CLOSED_MIN and verdict == "attributed":
+            verdict = "unexplained"
+            notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")
+        named.append(NamedEffect(
+            name=name, verdict=verdict, strength=float(value.strength), strength_ci95=(float(ci[0]), float(ci[1])),
+            shapes=dict(value.shapes), heldout_before=before, heldout_after=after,
+            reduction=1.0 - after / before if before > 0 else 0.0, reduction_ci95=row.reduction_ci95,
+            closed_fraction=(before - after) / (rms0 - 1.0) if rms0 > 1.0 else 0.0,
+            ambiguous_with=tuple(ambiguous), separated_by=tuple(SEPARATED_BY.get(m, "") for m in ambiguous),
+            beyond_tolerance=beyond, notes=tuple(notes)))
+    best = next((e.name for e in named if e.verdict == "attributed"), None)
+    return named, best, cannot
