@@ -201,7 +201,7 @@ class Powertrain:
         hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
         return float(th[lo]), float(th[hi])
 
-    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray) -> np.ndarray:
+    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
         """U'(theta) - load h'(theta), one fused pass (same equations as transmission.py, constants cached)."""
         g = self.geometry
         r, e, l = g.crank_m, g.offset_m, self.coupler_m
