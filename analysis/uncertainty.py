@@ -25,8 +25,8 @@ per unit z for any useful data) and is excluded from chi2 when intervals are com
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy import optimize, stats

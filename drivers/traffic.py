@@ -4,7 +4,8 @@ the rig-clock time to a sink, which the runner points at the recording's `/traff
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from hamr_bench.recording.contract import TRAFFIC_PREFIX
 

@@ -23,8 +23,9 @@ Units SI throughout: m, N, V, kg, Pa, m/V.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike

@@ -25,8 +25,7 @@ on a coarse grid across the linkage's range, the stable crossing (G from - to +)
 
 from __future__ import annotations
 
-
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -35,8 +34,8 @@ from hamr_bench.errors import ModelError
 from hamr_bench.model import actuator as act
 from hamr_bench.model import transmission as tr
 from hamr_bench.model.actuator import ActuatorParams, actuator_preset
-from hamr_bench.model.designs import DesignParams, design_preset
 from hamr_bench.model.contact import PRESSING, friction_reading_ratio
+from hamr_bench.model.designs import DesignParams, design_preset
 from hamr_bench.model.effects import Effect, active, apply_voltage_series
 from hamr_bench.model.flexures import SerialChain
 

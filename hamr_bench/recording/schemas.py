@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import re
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache, lru_cache
-from typing import Any, Callable
+from typing import Any
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
@@ -93,7 +94,7 @@ class ScalarSchema:
         return pack_n
 
 
-@lru_cache(maxsize=None)
+@cache
 def _scalar_struct(n_fields: int) -> struct.Struct:
     return struct.Struct("<" + "Bd" * n_fields)
 
@@ -230,17 +231,17 @@ def annotations_descriptor_set() -> bytes:
     return build_file_descriptor_set(ImageAnnotations).SerializeToString()
 
 
-@lru_cache(maxsize=None)
+@cache
 def event_descriptor_set() -> bytes:
     return _message_descriptor_set(EVENT_SCHEMA, EVENT_FIELDS)
 
 
-@lru_cache(maxsize=None)
+@cache
 def traffic_descriptor_set() -> bytes:
     return _message_descriptor_set(TRAFFIC_SCHEMA, TRAFFIC_FIELDS)
 
 
-@lru_cache(maxsize=None)
+@cache
 def image_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
     from mcap_protobuf.schema import build_file_descriptor_set
@@ -248,7 +249,7 @@ def image_descriptor_set() -> bytes:
     return build_file_descriptor_set(CompressedImage).SerializeToString()
 
 
-@lru_cache(maxsize=None)
+@cache
 def raw_image_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
     from mcap_protobuf.schema import build_file_descriptor_set

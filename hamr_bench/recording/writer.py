@@ -43,7 +43,7 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -204,7 +204,7 @@ class Recorder:
 
         self._thread = threading.Thread(target=self._run, name=f"recorder:{self.path.name}", daemon=True)
         self._thread.start()
-        start_utc = datetime.fromtimestamp(self.start_time_ns / 1e9, tz=timezone.utc).isoformat()
+        start_utc = datetime.fromtimestamp(self.start_time_ns / 1e9, tz=UTC).isoformat()
         try:
             self.add_metadata(
                 MetadataName.RECORDING,
@@ -739,7 +739,7 @@ class Recorder:
                     "exit_status": exit_status,
                     "reason": reason,
                     "end_time_ns": str(end_ns),
-                    "end_time_utc": datetime.fromtimestamp(end_ns / 1e9, tz=timezone.utc).isoformat(),
+                    "end_time_utc": datetime.fromtimestamp(end_ns / 1e9, tz=UTC).isoformat(),
                     "messages_written": str(sum(stats.written.values())),
                     "dropped_total": str(stats.dropped_total),
                     "dropped_by_topic": json.dumps(stats.dropped, sort_keys=True),

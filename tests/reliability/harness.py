@@ -515,7 +515,7 @@ def takes_the_daq(protocol: str, fault: str) -> bool:
     return protocol == "actuator" and name in ("force_sensor:disconnect", "force_sensor:no_reply")
 
 
-def loss_allowed(protocol: str, fault: str, outcome: "FaultOutcome") -> bool:
+def loss_allowed(protocol: str, fault: str, outcome: FaultOutcome) -> bool:
     """Samples missing from before the fault are allowed only where they never reached the computer: within
     IN_TRANSIT_S of the fault (an exchange straddling it), or - when the port of the force sensor (or the DAQ it is
     read through) goes away - the lines still unread in it, up to LINK_LOSS_BOUND_S. Commands are never lost: the
