@@ -17,12 +17,12 @@ from hamr_bench.recording.reader import RecordingReader, RecordingWarning
 
 # Metadata keys shown in the text summary, per record; anything else is in --json.
 _HIGHLIGHTS = {
-    "run_end": ("exit_status", "reason", "dropped_total", "end_time_utc", "recovered"),
-    "run": ("seed", "clock", "started_utc", "source"),
-    "rig": ("name", "kind", "path"),
-    "design": ("design", "layers", "fixture", "params_set"),
-    "protocol": ("name", "protocol_file"),
-    "software": ("hamr_bench", "python", "numpy", "mcap"),
+    MetadataName.RUN_END: ("exit_status", "reason", "dropped_total", "end_time_utc", "recovered"),
+    MetadataName.RUN: ("seed", "clock", "started_utc", "source"),
+    MetadataName.RIG: ("name", "kind", "path"),
+    MetadataName.DESIGN: ("design", "layers", "fixture", "params_set"),
+    MetadataName.PROTOCOL: ("name", "protocol_file"),
+    MetadataName.SOFTWARE: ("hamr_bench", "python", "numpy", "mcap"),
 }
 
 

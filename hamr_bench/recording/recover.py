@@ -112,11 +112,11 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                     stored_channels.add(channel_keys[channel_key])
             channel_ids[record.id] = channel_keys[channel_key]
         elif isinstance(record, MetadataRecord):
-            if record.name == "run_end":
+            if record.name == MetadataName.RUN_END:
                 source_run_end = dict(record.values)
                 return
             values = dict(record.values)
-            if record.name == "recording" and "start_time_ns" in values:
+            if record.name == MetadataName.RECORDING and "start_time_ns" in values:
                 try:
                     start_time_ns = int(values["start_time_ns"])
                 except ValueError:

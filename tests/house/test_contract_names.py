@@ -7,7 +7,10 @@ of every module (docstrings are documentation and may show a topic):
 - metadata names: the first argument of `add_metadata(...)`, and a literal record name looked up in a mapping
   whose expression says `meta` (`metadata.get("run_end")`, `meta["design"]`);
 - event kinds: the kind given to `record_event`, `RecordEvent`, `Note`, `write_event` (second argument), and a
-  literal kind compared with `.kind` of an event (a name bound by a loop over something that says `event`).
+  literal kind compared with `.kind` of an event (a name bound by a loop over something that says `event`) or with
+  a variable named `kind`;
+- metadata names, also: a literal compared with a record's `.name` (`record.name == "run_end"`) and a mapping
+  literal keyed by record names only (a table per record).
 
 The tests (`tests/`) spell the names on purpose: a test that reads a topic through the contract would pass if the
 contract itself changed a name, so they stay an independent check of the file format.
@@ -74,11 +77,30 @@ def spellings(source: str, rel: str) -> list[tuple[int, str, str]]:
             found += [(node.lineno, what, name) for what, name in _call_spellings(node)]
         elif isinstance(node, ast.Subscript) and _says_meta(node.value) and _literal(node.slice) in METADATA_NAMES:
             found.append((node.lineno, "metadata", _literal(node.slice) or ""))
-        elif isinstance(node, ast.Compare) and isinstance(node.left, ast.Attribute) and node.left.attr == "kind" \
-                and isinstance(node.left.value, ast.Name) and node.left.value.id in events:
-            for right in node.comparators:
-                values = right.elts if isinstance(right, ast.Tuple | ast.List | ast.Set) else [right]
-                found += [(node.lineno, "event", v) for v in map(_literal, values) if v in EVENT_KINDS]
+        elif isinstance(node, ast.Compare):
+            found += [(node.lineno, what, name) for what, name in _compare_spellings(node, events)]
+        elif isinstance(node, ast.Dict) and len(node.keys) >= 2 \
+                and all(_literal(k) in METADATA_NAMES for k in node.keys):
+            found += [(node.lineno, "metadata", _literal(k) or "") for k in node.keys]
+    return found
+
+
+def _compare_spellings(node: ast.Compare, events: set[str]) -> list[tuple[str, str]]:
+    """`event.kind == "step"` (an event bound by a loop over events), `kind == "run_end"` (a variable holding an
+    event's kind), `record.name == "run_end"` (a metadata record's name)."""
+    left = node.left
+    if isinstance(left, ast.Name) and left.id == "kind" or isinstance(left, ast.Attribute) and left.attr == "kind" \
+            and isinstance(left.value, ast.Name) and left.value.id in events:
+        what, names = "event", EVENT_KINDS
+    elif isinstance(left, ast.Attribute) and left.attr == "name" and any(
+            w in ast.unparse(left.value).lower() for w in ("meta", "record")):
+        what, names = "metadata", METADATA_NAMES
+    else:
+        return []
+    found = []
+    for right in node.comparators:
+        values = right.elts if isinstance(right, ast.Tuple | ast.List | ast.Set) else [right]
+        found += [(what, v) for v in map(_literal, values) if v in names]
     return found
 
 
@@ -135,6 +157,10 @@ def f(rec, reader, runner, events):
         if ev.kind in ("run_end", "safe_state"):
             pass
     motion.kind == "home"                      # not an event: the loop variable above is not it
+    if kind == "run_end": pass
+    if record.name == "run_end": pass
+    highlights = {"run_end": ("reason",), "rig": ("name",)}
+    condition = {"protocol": "static", "voltage_V": 0.0}  # a step's condition, not a table of records
     path = "tests/force/x"                     # not a topic
     rec.write_scalar(Topic.FORCE, 0.0, force_N=1.0)
 '''
@@ -142,4 +168,5 @@ def f(rec, reader, runner, events):
     assert sorted(found) == sorted([
         ("topic", "/force"), ("topic", "/traffic/"), ("metadata", "rig"), ("metadata", "run_end"),
         ("metadata", "design"), ("event", "tare"), ("event", "step"), ("event", "step"), ("event", "run_end"),
-        ("event", "safe_state")])
+        ("event", "safe_state"), ("event", "run_end"), ("metadata", "run_end"), ("metadata", "run_end"),
+        ("metadata", "rig")])
