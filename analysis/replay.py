@@ -206,7 +206,7 @@ def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[A
         if measured is not None:
             stage = _setpoints_from_positions(*measured)
     if stage is not None:
-        for t, target in zip(*stage):
+        for t, target in zip(*stage, strict=True):
             if math.isfinite(target):
                 add(float(t), 1, "pre", StageCommand(float(target)))
     # --- drives
@@ -264,7 +264,7 @@ def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[A
 def _setpoints_from_positions(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     out_t, out_x = [], []
     last = None
-    for ti, xi in zip(t, x):
+    for ti, xi in zip(t, x, strict=True):
         if not math.isfinite(xi):
             continue
         if last is None or abs(xi - last) > STAGE_TOLERANCE_M:

@@ -65,8 +65,8 @@ class Problem:
 
     def __post_init__(self) -> None:
         self.reference = np.asarray(self.reference, float)
-        self.z_ref = np.array([s.to_z(r, r) for s, r in zip(self.specs, self.reference)])
-        lb, ub = zip(*(s.z_bounds(r) for s, r in zip(self.specs, self.reference)))
+        self.z_ref = np.array([s.to_z(r, r) for s, r in zip(self.specs, self.reference, strict=True)])
+        lb, ub = zip(*(s.z_bounds(r) for s, r in zip(self.specs, self.reference, strict=True)), strict=True)
         self.lb, self.ub = np.array(lb), np.array(ub)
         self.z_ref = np.clip(self.z_ref, self.lb, self.ub)
         self.evaluations = 0

@@ -73,7 +73,7 @@ class _NullSink:
 
 def _produce_tick(sink: Any, tick: int, frames: list[np.ndarray] | None) -> None:
     force_t, slow_t, force = _tick_samples(tick)
-    for t, f in zip(force_t.tolist(), force.tolist()):
+    for t, f in zip(force_t.tolist(), force.tolist(), strict=True):
         sink.write_scalar(Topic.FORCE, t, force_N=f)
     for t in slow_t.tolist():
         sink.write_scalar(Topic.STAGE_POSITION, t, position_m=1e-3 * t)
@@ -131,7 +131,7 @@ def _all_messages(duration_s: float, frames: list[np.ndarray]) -> list[tuple[str
     messages: list[tuple[str, float, Any]] = []
     for tick in range(int(round(duration_s / TICK_S))):
         force_t, slow_t, force = _tick_samples(tick)
-        messages += [(Topic.FORCE, t, f) for t, f in zip(force_t.tolist(), force.tolist())]
+        messages += [(Topic.FORCE, t, f) for t, f in zip(force_t.tolist(), force.tolist(), strict=True)]
         for t in slow_t.tolist():
             messages.append((Topic.STAGE_POSITION, t, 1e-3 * t))
             messages.append((Topic.DRIVE_MONITOR, t, 200.0))

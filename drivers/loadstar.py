@@ -195,7 +195,7 @@ class LoadstarSensor:
         for i in range(len(lines) - 2, -1, -1):
             stamps[i] = stamps[i + 1] - spacing_s[i]
         samples: list[ForceSample] = []
-        for text, stamp in zip(lines, stamps):
+        for text, stamp in zip(lines, stamps, strict=True):
             time_s = min(max(stamp, self._last_sample_s + 1e-9), now_s)
             try:
                 force_N = self._to_N(text, time_s)

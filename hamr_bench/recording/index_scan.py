@@ -149,7 +149,7 @@ def _payloads(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarr
         if size == 0:
             return np.zeros((len(sizes), 0), dtype=np.uint8)
         return sliding_window_view(buf, size)[starts]
-    return [buf[a:b].tobytes() for a, b in zip(starts.tolist(), ends.tolist())]
+    return [buf[a:b].tobytes() for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
 
 
 class IndexBatch:
@@ -214,7 +214,7 @@ class IndexBatch:
             cuts = np.flatnonzero((segment[1:] != segment[:-1]) | (channel[1:] != channel[:-1])) + 1
             bounds = [0, *cuts.tolist(), len(order)]
             runs_by_segment: dict[int, list[ChannelRun]] = {}
-            for a, b in zip(bounds[:-1], bounds[1:]):
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
                 rows = order[a:b]
                 runs_by_segment.setdefault(int(segment[a]), []).append(ChannelRun(
                     int(channel[a]), log_time[rows], chunk_off[rows], buf, start[rows], end[rows]))
