@@ -58,6 +58,7 @@ from hamr_bench.recording.images import encode_image, raw_image_fields
 from hamr_bench.recording.mcap_file import McapFileWriter
 from hamr_bench.recording.reorder import ReorderStage
 from hamr_bench.recording.tap import RecorderTap, TapChannel
+import contextlib
 
 EXIT_STATUSES = ("success", "aborted", "failed")
 FORMAT_NAME = "hamr-bench-recording"
@@ -620,10 +621,8 @@ class Recorder:
                 os.fsync(self._file.fileno())
             except (OSError, ValueError):
                 pass
-            try:
+            with contextlib.suppress(OSError, ValueError):
                 self._file.close()
-            except (OSError, ValueError):
-                pass
 
     def _loop(self) -> None:
         q = self._queue
@@ -649,7 +648,7 @@ class Recorder:
                     wake.wait(timeout)
                 wake.clear()
                 item = None
-                try:
+                try:  # not contextlib.suppress: the writer thread's loop, a context manager every pass
                     item = q.get_nowait()
                 except queue.Empty:
                     pass

@@ -184,10 +184,7 @@ def fault_moments(protocol: str, tmp_factory: Any) -> dict[str, float]:
     for event in events:
         first.setdefault(event.kind, event.time_s)
     steps = [e.time_s for e in events if e.kind == "step"]
-    if "contact_found" in first:
-        search = (first["tare"] + first["contact_found"]) / 2
-    else:
-        search = first["home"] + 0.1
+    search = (first["tare"] + first["contact_found"]) / 2 if "contact_found" in first else first["home"] + 0.1
     drive = (steps[1] if protocol == "static" else first["drive_start"]) + 0.3
     _MOMENTS[protocol] = {"search": round(search, 3), "drive": round(drive, 3)}
     return _MOMENTS[protocol]
