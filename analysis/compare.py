@@ -41,18 +41,21 @@ from typing import Any
 import numpy as np
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording.contract import Topic
+from hamr_bench.recording.steps import parse_run
 
 CHANNELS = {  # measured streams (commands are inputs: a replay copies them)
-    "force_N": ("/force", "force_N"),
-    "stage_position_m": ("/stage/position", "position_m"),
-    "bias_monitor_V": ("/amplifier/bias/monitor", "voltage_V"),
-    "drive_monitor_V": ("/amplifier/drive/monitor", "voltage_V"),
-    "displacement_m": ("/camera/displacement", "displacement_m"),
+    "force_N": (Topic.FORCE, "force_N"),
+    "stage_position_m": (Topic.STAGE_POSITION, "position_m"),
+    "bias_monitor_V": (Topic.BIAS_MONITOR, "voltage_V"),
+    "drive_monitor_V": (Topic.DRIVE_MONITOR, "voltage_V"),
+    "displacement_m": (Topic.CAMERA_DISPLACEMENT, "displacement_m"),
 }
 EXCEED_FACTOR = 3.0
 OFFSET_Z = 5.0
 OFFSET_FRACTION = 0.01
 MIN_SAMPLES = 3
+END_MARGIN_S = 1e-9
 
 
 @dataclass
@@ -94,18 +97,14 @@ def load_side(path: Path | str) -> Side:
         steps_nonzero = np.abs(np.diff(x))
         steps_nonzero = steps_nonzero[steps_nonzero > 0]
         resolution[name] = float(steps_nonzero.min()) / math.sqrt(12) if steps_nonzero.size else 0.0
-    events = reader.events()
-    step_events = [e for e in events if e.kind == "step"]
-    ends = [e.time_s for e in events if e.kind in ("run_end", "safe_state")]
-    all_last = [ti.last_time_s for ti in topics.values() if ti.last_time_s is not None]
-    end_s = max(ends + all_last + [e.time_s for e in events]) + 1e-9 if (ends or all_last or events) else 0.0
-    first = [ti.first_time_s for ti in topics.values() if ti.first_time_s is not None]
-    start_s = min(first + [e.time_s for e in events]) if (first or events) else 0.0
-    steps: dict[int, tuple[float, float, str, dict[str, Any]]] = {}
-    boundaries = [e.time_s for e in step_events] + [end_s]
-    steps[-1] = (start_s, boundaries[0], "before the first step", {})
-    for i, e in enumerate(step_events):
-        steps[int(e.step)] = (e.time_s, boundaries[i + 1], e.message, dict(e.data))
+    # the steps as the recording contract's one step parser reads them; spans are half-open, so the last one is
+    # stretched by 1 ns to keep the data's last sample
+    parsed = parse_run(reader)
+    bounds = [st.start_s for st in parsed.steps] + [parsed.end_s + END_MARGIN_S]
+    steps: dict[int, tuple[float, float, str, dict[str, Any]]] = {
+        -1: (parsed.start_s, bounds[0], "before the first step", {})}
+    for st, end_s in zip(parsed.steps, bounds[1:], strict=True):
+        steps[st.index] = (st.start_s, end_s, st.message, dict(st.condition))
     return Side(path, channels, steps, resolution)
 
 

@@ -86,7 +86,7 @@ class GroupFit:
     dof: int
     method: str
     warnings: list[str] = field(default_factory=list)
-    derived: dict[str, dict[str, Any]] = field(default_factory=dict)
+    derived: dict[str, Any] = field(default_factory=dict)  # name -> a value's record, or a list (protocols)
     model: Any = None             # ActuatorParams or (ActuatorParams, DesignParams)
     specimens: dict[str, GroupFit] = field(default_factory=dict)   # per-specimen fits (two or more specimens)
     sessions: dict[str, list[str]] = field(default_factory=dict)   # session key -> its recordings
@@ -543,8 +543,8 @@ def _group(key: str, specs, reference, out: FitOutcome, obs, y, pred, method) ->
     corr = out.correlation
     # Correlations only between parameters the data constrain on both sides (one pinned at a bound, e.g. a kappa
     # at zero, has no meaningful local correlation).
-    constrained = [not out.intervals or out.intervals[j].status in ("identified", "weakly identified")
-                   for j in range(len(specs))]
+    statuses = [iv.status if iv is not None else "not computed" for iv in out.intervals or ()]
+    constrained = [not statuses or statuses[j] in ("identified", "weakly identified") for j in range(len(specs))]
     for i in range(len(specs)):
         for j in range(i + 1, len(specs)):
             r = corr[i, j]

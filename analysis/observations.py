@@ -27,9 +27,10 @@ different. Exactly:
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from hamr_bench.model import ActuatorParams, DesignParams, Powertrain
 from hamr_bench.model import actuator as act
@@ -58,7 +59,7 @@ class LegObservations:
     """Vectorised leg-protocol predictions for a fixed set of observation rows (built once, evaluated per fit step).
     `offset_m(...)` per row is the run's h0 (foot height at nominal zero sag)."""
 
-    def __init__(self, protocol: Sequence[str], voltage_V: Sequence[float], sag_m: Sequence[float]) -> None:
+    def __init__(self, protocol: ArrayLike, voltage_V: ArrayLike, sag_m: ArrayLike) -> None:
         self.protocol = np.asarray(protocol)
         self.voltage_V = np.asarray(voltage_V, float)
         self.sag_m = np.asarray(sag_m, float)

@@ -206,7 +206,7 @@ def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[A
         if measured is not None:
             stage = _setpoints_from_positions(*measured)
     if stage is not None:
-        for t, target in zip(*stage):
+        for t, target in zip(*stage, strict=True):
             if math.isfinite(target):
                 add(float(t), 1, "pre", StageCommand(float(target)))
     # --- drives
@@ -264,7 +264,7 @@ def _build_items(reader: Any, events: list[Any], fixture: str = "leg") -> list[A
 def _setpoints_from_positions(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     out_t, out_x = [], []
     last = None
-    for ti, xi in zip(t, x):
+    for ti, xi in zip(t, x, strict=True):
         if not math.isfinite(xi):
             continue
         if last is None or abs(xi - last) > STAGE_TOLERANCE_M:
@@ -325,8 +325,8 @@ def _drives(reader: Any, events: list[Any]) -> list[tuple[float, float, np.ndarr
         return out
     monitored = _scalars(reader, Topic.DRIVE_MONITOR, "voltage_V")
     if monitored is None:
-        raise RecordingError(f"{reader.path}: drive_start events but neither /amplifier/drive/command nor "
-                             "/amplifier/drive/monitor to replay the waveform from")
+        raise RecordingError(f"{reader.path}: drive_start events but neither {Topic.DRIVE_COMMAND} nor "
+                             f"{Topic.DRIVE_MONITOR} to replay the waveform from")
     # The drive as the recording contract infers it from the monitor (each cycle's corners and level): the
     # waveform the monitor measured, without its noise and overshoot, which the twin's amplifier would otherwise
     # be told to reproduce. Where no cycle is found, the monitor itself.
@@ -375,7 +375,7 @@ DESIGN_FIT_FIELDS = {"k_ser": "k_ser_N_per_m", "bias": "bias_m"}
 
 
 def _value(entry: Any, where: str) -> float:
-    value = entry.get("value") if isinstance(entry, dict) else entry
+    value: Any = entry.get("value") if isinstance(entry, dict) else entry
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -408,17 +408,18 @@ def model_overrides_from_fit(fit_path: Path | str, design: int | None, layers: i
         if values:
             out["actuator"] = values
     group = (doc.get("designs") or {}).get(str(design)) if design is not None and fixture == "leg" else None
-    if isinstance(group, dict):
-        values = {field_name: _value(group[key], f"{fit_path}: designs.{design}.{key}")
-                  for key, field_name in DESIGN_FIT_FIELDS.items() if key in group}
+    if isinstance(group, dict) and design is not None:
+        design_values: dict[str, Any] = {
+            field_name: _value(group[key], f"{fit_path}: designs.{design}.{key}")
+            for key, field_name in DESIGN_FIT_FIELDS.items() if key in group}
         kappas = [f"kappa_{i}" for i in (1, 2, 3)]
         if any(k in group for k in kappas):
             preset = design_preset(design).kappa_N_m_per_rad
-            values["kappa_N_m_per_rad"] = [
+            design_values["kappa_N_m_per_rad"] = [
                 _value(group[k], f"{fit_path}: designs.{design}.{k}") if k in group else float(preset[i])
                 for i, k in enumerate(kappas)]
-        if values:
-            out["design"] = values
+        if design_values:
+            out["design"] = design_values
     if not out:
         raise ConfigError(f"--params {fit_path}: has no actuators.{layers}"
                           + (f" or designs.{design}" if design is not None and fixture == "leg" else "")

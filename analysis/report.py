@@ -157,8 +157,8 @@ def write_report(recordings: Iterable[Path], out_dir: Path, method: str = "least
         md += check + [""]
     if figures:
         md += ["## Figures", ""]
-        for name, p in figures.items():
-            md += [f"![{name}]({p.name})", ""]
+        for name, figure in figures.items():
+            md += [f"![{name}]({figure.name})", ""]
     if fit.warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in fit.warnings]
     path = out_dir / "report.md"

@@ -25,8 +25,8 @@ per unit z for any useful data) and is excluded from chi2 when intervals are com
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy import optimize, stats
@@ -65,8 +65,8 @@ class Problem:
 
     def __post_init__(self) -> None:
         self.reference = np.asarray(self.reference, float)
-        self.z_ref = np.array([s.to_z(r, r) for s, r in zip(self.specs, self.reference)])
-        lb, ub = zip(*(s.z_bounds(r) for s, r in zip(self.specs, self.reference)))
+        self.z_ref = np.array([s.to_z(r, r) for s, r in zip(self.specs, self.reference, strict=True)])
+        lb, ub = zip(*(s.z_bounds(r) for s, r in zip(self.specs, self.reference, strict=True)), strict=True)
         self.lb, self.ub = np.array(lb), np.array(ub)
         self.z_ref = np.clip(self.z_ref, self.lb, self.ub)
         self.evaluations = 0
@@ -217,10 +217,10 @@ def _box_step(H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam:
             at_lo[i] = at_hi[i] = False
             continue
         alpha, block = 1.0, -1
-        for i in np.flatnonzero(f & (p != 0.0)):
-            a = ((lo[i] if p[i] < 0 else hi[i]) - d[i]) / p[i]
+        for k in np.flatnonzero(f & (p != 0.0)):
+            a = ((lo[k] if p[k] < 0 else hi[k]) - d[k]) / p[k]
             if a < alpha:
-                alpha, block = max(a, 0.0), int(i)
+                alpha, block = max(a, 0.0), int(k)
         d = d + alpha * p
         if block >= 0:
             if p[block] < 0:
@@ -348,7 +348,8 @@ def profile_interval(problem: Problem, z_hat: np.ndarray, chi2_min: float, j: in
         t = min(max(t_quad, 1e-6), room)
         lo_t, lo_g, lo_z = 0.0, -root_thr, z_hat.copy()
         prev_t, prev_g = lo_t, lo_g
-        hi_t = hi_g = hi_z = None
+        hi_t: float | None = None       # the bracket's far end, once found (hi_g, hi_z: its g and point)
+        hi_g, hi_z = 0.0, lo_z
         Jw = J
         side = 0
         done = None
@@ -369,7 +370,7 @@ def profile_interval(problem: Problem, z_hat: np.ndarray, chi2_min: float, j: in
             if g < 0:
                 prev_t, prev_g = lo_t, lo_g
                 lo_t, lo_g, lo_z = t, g, m.z
-                if side == -1 and hi_g is not None:
+                if side == -1 and hi_t is not None:
                     hi_g *= 0.5
                 side = -1
                 if hi_t is None and t >= room:
@@ -388,11 +389,11 @@ def profile_interval(problem: Problem, z_hat: np.ndarray, chi2_min: float, j: in
                     break
                 t = lo_t - lo_g * (hi_t - lo_t) / (hi_g - lo_g)
                 t = min(max(t, lo_t + 0.02 * (hi_t - lo_t)), hi_t - 0.02 * (hi_t - lo_t))
-        if done is None and hi_t is None:
-            ends.append(float(bound))
-            at_bound.append(True)
-            continue
         if done is None:
+            if hi_t is None:
+                ends.append(float(bound))
+                at_bound.append(True)
+                continue
             done = 0.5 * (lo_t + hi_t)
         ends.append(float(z_hat[j] + direction * done))
         at_bound.append(False)

@@ -73,7 +73,9 @@ class Context:
 
             out = self.root / "campaign"
             out.mkdir()
-            self.campaign_result = bench_campaign.run(out_dir=out, **self.campaign_subset())
+            # every named parameter given, so the subset's keys (designs, layers) can only be the subset's
+            self.campaign_result = bench_campaign.run(jobs=None, set_options=None, out_dir=out,
+                                                      **self.campaign_subset())
             self.campaign_dir = out
         return self.campaign_dir
 

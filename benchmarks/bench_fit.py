@@ -66,6 +66,8 @@ def run(seeds: int = 12) -> dict:
             g = fit_transmission(table_dataset(d, seed=5000 + seed), d, "least-squares")
             for name, value in truth.items():
                 est = g.params[name]
+                if est.ci95 is None:
+                    raise RuntimeError(f"design {d} seed {seed}: {name} has no confidence interval")
                 inside = bool(est.ci95[0] <= value <= est.ci95[1])
                 if name in identified[d]:
                     total += 1

@@ -33,6 +33,7 @@ import numpy as np
 from benchmarks import bench_recorder as br
 from hamr_bench.clock import RealClock
 from hamr_bench.recording import Recorder
+from hamr_bench.recording.contract import Topic
 
 TICK_S = 0.01
 FORCE_HZ, SLOW_HZ, CAMERA_FPS = 10_000, 1_000, 100
@@ -51,13 +52,13 @@ def _produce(sink: Any, tick: int, frames: list[np.ndarray], markers: list[tuple
     force_t = (t0 + np.arange(int(FORCE_HZ * TICK_S)) / FORCE_HZ).tolist()
     force = (0.05 * np.sin(2 * np.pi * 10 * np.asarray(force_t))).tolist()
     for t, f in zip(force_t, force, strict=True):
-        sink.write_scalar("/force", t, force_N=f)
+        sink.write_scalar(Topic.FORCE, t, force_N=f)
     for t in (t0 + np.arange(int(SLOW_HZ * TICK_S)) / SLOW_HZ).tolist():
-        sink.write_scalar("/stage/position", t, position_m=1e-3)
-        sink.write_scalar("/amplifier/drive/monitor", t, voltage_V=200.0)
-        sink.write_scalar("/amplifier/bias/monitor", t, voltage_V=200.0)
+        sink.write_scalar(Topic.STAGE_POSITION, t, position_m=1e-3)
+        sink.write_scalar(Topic.DRIVE_MONITOR, t, voltage_V=200.0)
+        sink.write_scalar(Topic.BIAS_MONITOR, t, voltage_V=200.0)
     k = tick % len(frames)
-    sink.write_image("/camera/image", t0, frames[k], marker_px=markers[k])
+    sink.write_image(Topic.CAMERA_IMAGE, t0, frames[k], marker_px=markers[k])
 
 
 class _NullSink:
@@ -96,7 +97,7 @@ def _recorded(path: Path, rec: Recorder, duration_s: float, frames: list[np.ndar
     wall = time.perf_counter() - wall0
     expected = int(round(duration_s / TICK_S)) * (int(FORCE_HZ * TICK_S) + 3 * int(SLOW_HZ * TICK_S))
     written = sum(n for topic, n in stats.written.items() if topic in (
-        "/force", "/stage/position", "/amplifier/drive/monitor", "/amplifier/bias/monitor"))
+        Topic.FORCE, Topic.STAGE_POSITION, Topic.DRIVE_MONITOR, Topic.BIAS_MONITOR))
     return {"wall_s": wall, "cpu_s": cpu, "dropped": stats.dropped_total, "samples_expected": expected,
             "samples_written": written, "file_MB": path.stat().st_size / 1e6}
 
@@ -128,8 +129,8 @@ def live_latency(duration_s: float, out_dir: Path) -> dict[str, Any]:
         out, err = client.communicate(timeout=60)
     report: dict[str, Any] = json.loads(out) if out.strip() else {"topics": {}, "errors": [err[-500:]]}
     topics: dict[str, dict[str, float]] = report["topics"]
-    scalars = ("/force", "/stage/position", "/amplifier/drive/monitor")
-    images = ("/camera/image", "/camera/roi")
+    scalars = (Topic.FORCE, Topic.STAGE_POSITION, Topic.DRIVE_MONITOR)
+    images = (Topic.CAMERA_IMAGE, Topic.CAMERA_ROI)
     return {
         "duration_s": duration_s,
         "samples_median_ms": _worst(topics, scalars, "median_ms"),

@@ -23,7 +23,7 @@ from pathlib import Path
 from hamr_bench.protocols.session import RunRequest, run_protocol
 from hamr_bench.recording import RecordingReader
 
-CASES = {"blocked-force": [], "sag-sweep": [], "free-displacement": [], "actuator": []}
+CASES: dict[str, list[str]] = {"blocked-force": [], "sag-sweep": [], "free-displacement": [], "actuator": []}
 QUICK = {"blocked-force": ["repetitions=2"], "sag-sweep": ["repetitions=1"], "free-displacement": ["repetitions=1"],
          "actuator": ["repetitions=1"]}
 

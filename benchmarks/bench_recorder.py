@@ -35,6 +35,7 @@ import numpy as np
 from hamr_bench.clock import RealClock
 from hamr_bench.recording import Recorder
 from hamr_bench.recording import schemas
+from hamr_bench.recording.contract import Topic
 from hamr_bench.recording.images import encode_png_stored
 
 FORCE_HZ, STAGE_HZ, VOLTAGE_HZ, CAMERA_FPS = 10_000, 1_000, 1_000, 100
@@ -72,16 +73,18 @@ class _NullSink:
 
 def _produce_tick(sink: Any, tick: int, frames: list[np.ndarray] | None) -> None:
     force_t, slow_t, force = _tick_samples(tick)
-    for t, f in zip(force_t.tolist(), force.tolist()):
-        sink.write_scalar("/force", t, force_N=f)
+    for t, f in zip(force_t.tolist(), force.tolist(), strict=True):
+        sink.write_scalar(Topic.FORCE, t, force_N=f)
     for t in slow_t.tolist():
-        sink.write_scalar("/stage/position", t, position_m=1e-3 * t)
-        sink.write_scalar("/amplifier/drive/monitor", t, voltage_V=200.0)
+        sink.write_scalar(Topic.STAGE_POSITION, t, position_m=1e-3 * t)
+        sink.write_scalar(Topic.DRIVE_MONITOR, t, voltage_V=200.0)
     if frames:
-        sink.write_image("/camera/image", tick * TICK_S, frames[tick % len(frames)], IMAGE_FORMAT[0])
+        sink.write_image(Topic.CAMERA_IMAGE, tick * TICK_S, frames[tick % len(frames)], IMAGE_FORMAT[0])
 
 
-def _thread_cpu_s(native_id: int) -> float:
+def _thread_cpu_s(native_id: int | None) -> float:
+    if native_id is None:  # the thread has not started
+        return float("nan")
     try:
         fields = Path(f"/proc/self/task/{native_id}/stat").read_text().rsplit(")", 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -128,15 +131,15 @@ def _all_messages(duration_s: float, frames: list[np.ndarray]) -> list[tuple[str
     messages: list[tuple[str, float, Any]] = []
     for tick in range(int(round(duration_s / TICK_S))):
         force_t, slow_t, force = _tick_samples(tick)
-        messages += [("/force", t, f) for t, f in zip(force_t.tolist(), force.tolist())]
+        messages += [(Topic.FORCE, t, f) for t, f in zip(force_t.tolist(), force.tolist(), strict=True)]
         for t in slow_t.tolist():
-            messages.append(("/stage/position", t, 1e-3 * t))
-            messages.append(("/amplifier/drive/monitor", t, 200.0))
-        messages.append(("/camera/image", tick * TICK_S, png[tick % len(png)]))
+            messages.append((Topic.STAGE_POSITION, t, 1e-3 * t))
+            messages.append((Topic.DRIVE_MONITOR, t, 200.0))
+        messages.append((Topic.CAMERA_IMAGE, tick * TICK_S, png[tick % len(png)]))
     return messages
 
 
-_FIELD = {"/force": "force_N", "/stage/position": "position_m", "/amplifier/drive/monitor": "voltage_V"}
+_FIELD: dict[str, str] = {Topic.FORCE: "force_N", Topic.STAGE_POSITION: "position_m", Topic.DRIVE_MONITOR: "voltage_V"}
 
 
 def throughput(
@@ -151,7 +154,7 @@ def throughput(
     # Raw writer: every payload encoded beforehand (the same bytes the recorder produces).
     encoded = []
     for topic, t, value in messages:
-        if topic == "/camera/image":
+        if topic == Topic.CAMERA_IMAGE:
             msg = CompressedImage(frame_id="camera", format="png", data=value)
             msg.timestamp.FromNanoseconds(start_ns + round(t * 1e9))
             payload = msg.SerializeToString()
@@ -195,9 +198,9 @@ def _raw_writer_pass(encoded: list[tuple[str, int, bytes]], path: Path, compress
             enable_data_crcs=True,
         )
         w.start()
-        ids = {}
-        for topic in ("/force", "/stage/position", "/amplifier/drive/monitor", "/camera/image"):
-            ids[topic] = w.register_channel(topic, "protobuf", w.register_schema(topic, "protobuf", b""))
+        ids: dict[str, int] = {}
+        for name in (Topic.FORCE, Topic.STAGE_POSITION, Topic.DRIVE_MONITOR, Topic.CAMERA_IMAGE):
+            ids[name] = w.register_channel(name, "protobuf", w.register_schema(name, "protobuf", b""))
         for topic, log_ns, payload in encoded:
             w.add_message(ids[topic], log_ns, payload, log_ns, 0)
         w.finish()
@@ -217,11 +220,11 @@ def _recorder_pass(
         max_queue_messages=20_000, max_queue_bytes=16 * 1024 * 1024, when_full="block",
     )
     for topic, t, value in messages:
-        if topic == "/camera/image":
+        if topic == Topic.CAMERA_IMAGE:
             rec.write_image(topic, t, value, "png")
-        elif topic == "/force":
+        elif topic == Topic.FORCE:
             rec.write_scalar(topic, t, force_N=value)
-        elif topic == "/stage/position":
+        elif topic == Topic.STAGE_POSITION:
             rec.write_scalar(topic, t, position_m=value)
         else:
             rec.write_scalar(topic, t, voltage_V=value)
@@ -256,7 +259,7 @@ def encoding_candidates(n: int = 50_000, repeats: int = 5) -> dict[str, dict[str
             encode_only[name] = min(encode_only[name], (time.perf_counter() - t0) / n * 1e6)
             w = Writer(io.BytesIO(), chunk_size=256 * 1024, compression=CompressionType.LZ4, enable_data_crcs=True)
             w.start()
-            ch = w.register_channel("/force", "protobuf", w.register_schema("x", "protobuf", b""))
+            ch = w.register_channel(Topic.FORCE, "protobuf", w.register_schema("x", "protobuf", b""))
             t0 = time.perf_counter()
             for t, f in zip(times_list, values):
                 log_ns = round(t * 1e9)

@@ -23,7 +23,7 @@ from pathlib import Path
 from analysis.replay import read_replay_source, replay_recording
 from hamr_bench.protocols.session import RunRequest, run_protocol
 
-CASES = {
+CASES: dict[str, list[str]] = {
     "blocked-force": [],
     "sag-sweep": [],
     "free-displacement": [],
@@ -41,7 +41,7 @@ def measure(protocol: str, options: list[str], repeats: int, work: Path) -> dict
     run_s = time.perf_counter() - t0
     duration_s = read_replay_source(source).duration_s
     best = float("inf")
-    for i in range(repeats):
+    for _i in range(repeats):
         t0 = time.perf_counter()
         result, _ = replay_recording(source, work / f"{protocol}-twin.mcap", overwrite=True)
         best = min(best, time.perf_counter() - t0)

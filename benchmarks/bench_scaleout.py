@@ -15,9 +15,13 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 from analysis.parallel import default_jobs, parallel_map
+
+T = TypeVar("T")
 
 
 def observations_of(path: str) -> tuple[str, int]:
@@ -27,8 +31,10 @@ def observations_of(path: str) -> tuple[str, int]:
     return Path(path).name, len(run.observations)
 
 
-def _timed(fn, repeat: int) -> tuple[float, object]:
-    best, out = float("inf"), None
+def _timed(fn: Callable[[], T], repeat: int) -> tuple[float, T]:
+    if repeat < 1:
+        raise ValueError(f"repeat {repeat}: at least one run")
+    best = float("inf")
     for _ in range(repeat):
         t0 = time.perf_counter()
         out = fn()
@@ -42,7 +48,7 @@ def run(paths: list[Path], workers: int | None = None, repeat: int = 1) -> dict:
     serial_s, serial = _timed(lambda: parallel_map(observations_of, items, jobs=1), repeat)
     local_s, local = _timed(lambda: parallel_map(observations_of, items, jobs=workers), repeat)
     assert local == serial, "the pool gave other results than the serial run"
-    out = {"items": len(items), "workers": workers, "serial_s": serial_s, "local_s": local_s,
+    out: dict[str, Any] = {"items": len(items), "workers": workers, "serial_s": serial_s, "local_s": local_s,
            "observations": sum(n for _, n in serial)}
     try:
         import distributed

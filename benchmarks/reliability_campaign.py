@@ -139,6 +139,8 @@ def matrix(root: Path) -> bool:
                 elif not o.triggered:
                     cell = "-"
                     ok &= o.code == 0
+                elif o.safe is None:
+                    raise RuntimeError(f"{protocol} {fault}: a modelled fault's run has no safe-state measure")
                 else:
                     t0 = o.first_use_s
                     cell_ok = (o.code != 0 and len(o.stderr_lines) == 1 and o.exit_status == "failed"
@@ -186,7 +188,8 @@ def soak(minutes: float, seed: int, root: Path) -> bool:
         work.mkdir()
         virtual_s, runs, faulted, safe_all, attempts, refused_n = 0.0, 0, 0, True, 0, 0
         t0 = time.perf_counter()
-        rss0 = objs0 = None
+        rss0: int | None = None
+        objs0 = 0
         span = {"actuator": 90.0, "blocked-force": 17.0, "sag-sweep": 19.5, "free-displacement": 2.4,
                 "static": 21.4}[protocol]  # virtual length of the short run (for a fault time inside it)
         while virtual_s < minutes * 60:
@@ -201,7 +204,7 @@ def soak(minutes: float, seed: int, root: Path) -> bool:
                 # (fault time ~0): one line, exit 2, the recording closed with "rig could not be built"
                 refused = run.code == 2 and len(run.stderr_lines) == 1 and (
                     "unknown fault" in run.stderr_lines[0]
-                    or RecordingReader(out).exit_reason.startswith("rig could not be built"))
+                    or (RecordingReader(out).exit_reason or "").startswith("rig could not be built"))
                 if not refused:
                     print(f"   NOT REFUSED CLEANLY: {protocol} {faults} {run.stderr_lines}")
                 safe_all &= refused
@@ -228,6 +231,8 @@ def soak(minutes: float, seed: int, root: Path) -> bool:
             gc.collect()
             if rss0 is None:
                 rss0, objs0 = rss_kB(), len(gc.get_objects())
+        if rss0 is None:
+            raise RuntimeError(f"{protocol}: no run completed in {attempts} attempts")
         rss1, objs1 = rss_kB(), len(gc.get_objects())
         wall = time.perf_counter() - t0
         growth = rss1 - rss0

@@ -187,10 +187,9 @@ class AtiNano17:
             # (`samples_before`) so the caller can keep them.
             good = self._good_prefix(data)
             force = self._sign * self._convert(data[:, :good])[self._axis] if good else np.empty(0)
-            exc.samples_before = [ForceSample(t, f)  # type: ignore[attr-defined]
-                                  for t, f in zip(times[:good].tolist(), force.tolist())]
+            exc.samples_before = [ForceSample(t, f) for t, f in zip(times[:good].tolist(), force.tolist(), strict=True)]
             raise
-        return [ForceSample(t, f) for t, f in zip(times.tolist(), force.tolist())]
+        return [ForceSample(t, f) for t, f in zip(times.tolist(), force.tolist(), strict=True)]
 
     def _good_prefix(self, data: np.ndarray) -> int:
         """How many leading samples of a block convert without an overload."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import socket
 import struct
+from typing import Literal, overload
 
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceProtocolError, DeviceTimeout
@@ -110,7 +111,7 @@ class AtiNetFt:
     def read_stream(self) -> list[ForceSample]:
         if not self._streaming:
             return []
-        samples = []
+        samples: list[ForceSample] = []
         while True:
             data = self._receive(blocking=False)
             if data is None:
@@ -142,7 +143,14 @@ class AtiNetFt:
             raise DeviceFault(f"{self._name}: cannot reach Net F/T at {self._address[0]}:{self._address[1]} "
                               f"({exc.strerror or exc})", device=self._name) from None
 
+    @overload
+    def _receive(self, blocking: Literal[True], wait_s: float | None = None) -> bytes: ...
+
+    @overload
+    def _receive(self, blocking: bool, wait_s: float | None = None) -> bytes | None: ...
+
     def _receive(self, blocking: bool, wait_s: float | None = None) -> bytes | None:
+        """One record; None when not `blocking` and none has come within `wait_s` (blocking: DeviceTimeout)."""
         try:
             self._sock.settimeout(self._timeout_s if blocking else (wait_s or 0.0))
             data, _ = self._sock.recvfrom(1024)

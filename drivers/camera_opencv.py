@@ -58,6 +58,7 @@ class OpenCvCamera:
     ) -> None:
         self._name = name
         self._clock = clock
+        cap: CaptureLike
         if isinstance(source, (int, str)):
             cap = cv2.VideoCapture(source, api_preference)
             if not cap.isOpened():
@@ -118,7 +119,7 @@ class OpenCvCamera:
 
     def set_roi(self, x: int, y: int, width: int, height: int) -> None:
         full_w, full_h = self.frame_size_px
-        fits = 0 <= x and 0 <= y and width > 0 and height > 0 and x + width <= full_w and y + height <= full_h
+        fits = x >= 0 and y >= 0 and width > 0 and height > 0 and x + width <= full_w and y + height <= full_h
         if not fits:
             raise ConfigError(
                 f"{self._name}: roi=({x}, {y}, {width}, {height}) does not fit the {full_w}x{full_h} frame"

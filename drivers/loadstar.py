@@ -194,15 +194,15 @@ class LoadstarSensor:
         stamps = [now_s] * len(lines)
         for i in range(len(lines) - 2, -1, -1):
             stamps[i] = stamps[i + 1] - spacing_s[i]
-        samples = []
-        for text, stamp in zip(lines, stamps):
+        samples: list[ForceSample] = []
+        for text, stamp in zip(lines, stamps, strict=True):
             time_s = min(max(stamp, self._last_sample_s + 1e-9), now_s)
             try:
                 force_N = self._to_N(text, time_s)
             except (DeviceFault, DeviceProtocolError) as exc:
                 # The readings before the bad line are good: they travel with the error (`samples_before`) so
                 # the caller can keep them.
-                exc.samples_before = samples  # type: ignore[attr-defined]
+                exc.samples_before = samples
                 raise
             samples.append(ForceSample(time_s=time_s, force_N=force_N))
             self._last_sample_s = time_s

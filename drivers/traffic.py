@@ -4,30 +4,33 @@ the rig-clock time to a sink, which the runner points at the recording's `/traff
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
+
+from hamr_bench.recording.contract import TRAFFIC_PREFIX
 
 
 class TappedPort:
     def __init__(self, port: Any, device: str, clock: Any, sink: Callable[[str, float, str, bytes], None]):
         object.__setattr__(self, "_port", port)
-        object.__setattr__(self, "_device", device)
         object.__setattr__(self, "_clock", clock)
         object.__setattr__(self, "_sink", sink)
+        object.__setattr__(self, "_topic", f"{TRAFFIC_PREFIX}{device}")
 
     def write(self, data: bytes) -> int:
-        self._sink(f"/traffic/{self._device}", self._clock.now_s(), "tx", bytes(data))
+        self._sink(self._topic, self._clock.now_s(), "tx", bytes(data))
         return self._port.write(data)
 
     def read(self, size: int = 1) -> bytes:
         data = self._port.read(size)
         if data:
-            self._sink(f"/traffic/{self._device}", self._clock.now_s(), "rx", bytes(data))
+            self._sink(self._topic, self._clock.now_s(), "rx", bytes(data))
         return data
 
     def read_until(self, expected: bytes = b"\n", size: int | None = None) -> bytes:
         data = self._port.read_until(expected, size)
         if data:
-            self._sink(f"/traffic/{self._device}", self._clock.now_s(), "rx", bytes(data))
+            self._sink(self._topic, self._clock.now_s(), "rx", bytes(data))
         return data
 
     def __getattr__(self, name: str) -> Any:

@@ -13,14 +13,12 @@ bench factory turns one into a `SimulatedBench` whose ports the device factory t
 
 from __future__ import annotations
 
-import importlib
-import importlib.metadata
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, cast, runtime_checkable
 
+from hamr_bench import entry_points
 from hamr_bench.clock import Clock
 from hamr_bench.errors import ConfigError
 from hamr_bench.interfaces import Amplifier, Camera, ForceSensor, Stage
@@ -140,23 +138,8 @@ def register_backend(name: str, backend: object) -> None:
 
 
 def declared_backends() -> dict[str, str]:
-    """name -> "module:attribute" of every declared backend. The source tree this package runs from declares its
-    own (its pyproject.toml) and wins over installed metadata: an editable install's entry points are fixed when
-    it is installed, so a checkout run in place would otherwise see the backends of whatever was installed."""
-    declared = {ep.name: ep.value for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
-    declared.update(_source_tree_backends())
-    return declared
-
-
-def _source_tree_backends() -> dict[str, str]:
-    pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
-    try:
-        project = tomllib.loads(pyproject.read_text(encoding="utf-8")).get("project", {})
-    except (OSError, tomllib.TOMLDecodeError):
-        return {}
-    if project.get("name") != "hamr-bench":
-        return {}
-    return dict(project.get("entry-points", {}).get(ENTRY_POINT_GROUP, {}))
+    """name -> "module:attribute" of every declared backend (the source tree's own first: `entry_points`)."""
+    return entry_points.declared(ENTRY_POINT_GROUP)
 
 
 def load_backend(name: str) -> object:
@@ -168,17 +151,12 @@ def load_backend(name: str) -> object:
         known = ", ".join(sorted(declared)) or "none"
         raise ConfigError(f"backend {name!r} is not installed (entry-point group {ENTRY_POINT_GROUP}; declared: "
                           f"{known}): reinstall hamr-bench (pip install -e .)")
-    module_name, _, attr = declared[name].partition(":")
     try:
-        module = importlib.import_module(module_name.strip())
+        return entry_points.resolve(declared[name])
     except ImportError as exc:
         raise ConfigError(f"backend {name!r} cannot be loaded: {exc}") from None
-    if not attr:
-        return module
-    try:
-        return getattr(module, attr.strip())
     except AttributeError:
-        raise ConfigError(f"backend {name!r}: {module_name} has no {attr.strip()!r}") from None
+        raise ConfigError(f"backend {name!r}: {declared[name]} names nothing") from None
 
 
 def device_factory(name: str = DRIVERS) -> DeviceFactory:

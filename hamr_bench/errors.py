@@ -7,6 +7,11 @@ these. Anything that is not a `HamrBenchError` is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hamr_bench.interfaces import ForceSample
+
 
 class HamrBenchError(Exception):
     """Base of every expected failure: the message is complete on one line."""
@@ -30,6 +35,9 @@ class DeviceError(HamrBenchError):
     def __init__(self, message: str, device: str = "device") -> None:
         super().__init__(message)
         self.device = device
+        # Good force readings taken in the same batch before the error (a force sensor driver fills it), so the
+        # runner records them instead of losing them.
+        self.samples_before: list[ForceSample] = []
 
 
 class DeviceTimeout(DeviceError):

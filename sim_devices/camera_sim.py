@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -205,7 +206,7 @@ class SimCamera:
         self,
         clock: Clock,
         rng: np.random.Generator,
-        marker_px: Callable[[float], Sequence[float]],
+        marker_px: Callable[[float], Sequence[float]] | Callable[[np.ndarray], np.ndarray],
         spec: SimCameraSpec = SimCameraSpec(),
     ) -> None:
         self._clock = clock
@@ -278,9 +279,11 @@ class SimCamera:
         m = self._spec.motion_samples
         times = start_s + (np.arange(m) + 0.5) / m * exposure
         if getattr(self._marker_px, "vectorised", False):  # one call for the exposure's motion samples
-            positions = np.asarray(self._marker_px(times), dtype=float).reshape(m, 2)
+            many = cast(Callable[[np.ndarray], np.ndarray], self._marker_px)  # declared vectorised
+            positions = np.asarray(many(times), dtype=float).reshape(m, 2)
         else:
-            positions = np.array([self._marker_px(float(t)) for t in times], dtype=float).reshape(m, 2)
+            one = cast(Callable[[float], Sequence[float]], self._marker_px)
+            positions = np.array([one(float(t)) for t in times], dtype=float).reshape(m, 2)
         key = (exposure, self._spec.background_e_per_pixel_per_s, self._height, self._width)
         if self._table_key != key:
             self._table = background_dn_table(self._spec, exposure * self._spec.background_e_per_pixel_per_s)

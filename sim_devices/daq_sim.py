@@ -34,6 +34,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -353,23 +354,24 @@ class SimDaq:
         """Output at times `t`; `span` is (t.min(), t.max()) when the caller has it already."""
         if t.size == 1:
             return np.array([self._output_at(ch, float(t.flat[0]), apply_trip)])
-        if t.size and span is None:
-            span = (float(t.min()), float(t.max()))
-        if t.size and ch.segments and ch.tau_s > 0:
-            lo = bisect.bisect_right(ch.starts_s, span[0]) - 1
-            if lo >= 0 and bisect.bisect_right(ch.starts_s, span[1]) - 1 == lo:
+        if t.size == 0:
+            return np.zeros_like(t, dtype=float)
+        first_s, last_s = span if span is not None else (float(t.min()), float(t.max()))
+        if ch.segments and ch.tau_s > 0:
+            lo = bisect.bisect_right(ch.starts_s, first_s) - 1
+            if lo >= 0 and bisect.bisect_right(ch.starts_s, last_s) - 1 == lo:
                 # every time in one segment (a monitor read): the loop below without its index bookkeeping
                 out = _segment_output(ch.segments[lo], t, ch.tau_s)
                 if apply_trip and ch.tripped_at_s is not None:
                     out[t >= ch.tripped_at_s] = 0.0
                 return out
         out = np.zeros_like(t, dtype=float)
-        if ch.segments and t.size:
+        if ch.segments:
             # Only the segments between the first and last time asked matter: converting the whole history (tens
             # of thousands of ramp steps) to an array on every monitor read dominated the bench's cost. (One time
             # alone took the scalar path above.)
-            lo = max(bisect.bisect_right(ch.starts_s, span[0]) - 1, 0)
-            hi = bisect.bisect_right(ch.starts_s, span[1])
+            lo = max(bisect.bisect_right(ch.starts_s, first_s) - 1, 0)
+            hi = bisect.bisect_right(ch.starts_s, last_s)
             idx = np.searchsorted(np.asarray(ch.starts_s[lo:hi]), t, side="right") - 1 + lo
             for i in np.unique(idx[idx >= 0]):
                 sel = idx == i
@@ -427,7 +429,8 @@ class SimDaq:
         else:
             assert self._wrench_source is not None
             if getattr(self._wrench_source, "vectorised", False):  # one call for the whole block
-                wrench = np.asarray(self._wrench_source(times_s), dtype=float).reshape(-1, 6)
+                many = cast(Callable[[np.ndarray], np.ndarray], self._wrench_source)  # takes the array of times
+                wrench = np.asarray(many(times_s), dtype=float).reshape(-1, 6)
             else:
                 wrench = np.array([np.asarray(self._wrench_source(float(t)), dtype=float) for t in times_s])
                 wrench = wrench.reshape(-1, 6)

@@ -11,34 +11,38 @@ nothing ever coming raises instead of hanging. A disconnected endpoint makes rea
 from __future__ import annotations
 
 import urllib.parse
+from typing import TYPE_CHECKING
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from sim_devices.serial_link import LineEndpoint, get_endpoint, wait_until
+from sim_devices.serial_link import SerialEndpoint, get_endpoint, wait_until
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer  # collections.abc.Buffer from Python 3.12
 
 
 class Serial(SerialBase):
-    """A pyserial port backed by a registered `LineEndpoint`."""
+    """A pyserial port backed by a registered `SerialEndpoint`."""
 
     def __init__(self, *args, **kwargs) -> None:
-        self._endpoint: LineEndpoint | None = None
+        self._endpoint: SerialEndpoint | None = None
         self._rx = bytearray()
         super().__init__(*args, **kwargs)
 
     def open(self) -> None:
         if self.is_open:
             raise SerialException("Port is already open.")
-        if self._port is None:
+        if self.port is None:
             raise SerialException("Port must be configured before it can be used.")
-        parts = urllib.parse.urlsplit(self._port)
+        parts = urllib.parse.urlsplit(self.port)
         if parts.scheme != "hamrsim":
-            raise SerialException(f"expected a URL hamrsim://NAME, got {self._port!r}")
+            raise SerialException(f"expected a URL hamrsim://NAME, got {self.port!r}")
         name = parts.netloc or parts.path.lstrip("/")
         endpoint = get_endpoint(name)
         if endpoint is None:
-            raise SerialException(f"no simulated device registered as {name!r} ({self._port})")
+            raise SerialException(f"no simulated device registered as {name!r} ({self.port})")
         if not endpoint.is_connected():
-            raise SerialException(f"could not open port {self._port}: device disconnected")
+            raise SerialException(f"could not open port {self.port}: device disconnected")
         self._endpoint = endpoint
         self.is_open = True
         # Serial.open() on a real port flushes input: bytes sent before the open are lost.
@@ -61,14 +65,14 @@ class Serial(SerialBase):
     def _update_break_state(self) -> None:
         pass
 
-    def _check(self) -> LineEndpoint:
+    def _check(self) -> SerialEndpoint:
         if not self.is_open or self._endpoint is None:
             raise PortNotOpenError()
         if not self._endpoint.is_connected():
-            raise SerialException(f"{self._port}: device disconnected")
+            raise SerialException(f"{self.port}: device disconnected")
         return self._endpoint
 
-    def _pull(self, endpoint: LineEndpoint) -> None:
+    def _pull(self, endpoint: SerialEndpoint) -> None:
         self._rx += endpoint.output_until(endpoint.clock.now_s())
 
     @property
@@ -80,7 +84,7 @@ class Serial(SerialBase):
     def read(self, size: int = 1) -> bytes:
         endpoint = self._check()
         clock = endpoint.clock
-        timeout_s = self._timeout
+        timeout_s = self.timeout
         deadline_s = None if timeout_s is None else clock.now_s() + timeout_s
         while True:
             self._pull(endpoint)
@@ -88,20 +92,20 @@ class Serial(SerialBase):
                 break
             next_s = endpoint.next_output_s()
             if next_s is None and deadline_s is None:
-                raise SerialException(f"{self._port}: blocking read with no timeout and nothing will arrive")
-            if next_s is None or (deadline_s is not None and next_s > deadline_s):
+                raise SerialException(f"{self.port}: blocking read with no timeout and nothing will arrive")
+            if deadline_s is not None and (next_s is None or next_s > deadline_s):
                 wait_until(clock, deadline_s)
                 self._check()
                 self._pull(endpoint)
                 break
-            if next_s > clock.now_s():
+            if next_s is not None and next_s > clock.now_s():
                 wait_until(clock, next_s)
             self._check()
         data = bytes(self._rx[:size])
         del self._rx[:size]
         return data
 
-    def write(self, data: bytes) -> int:
+    def write(self, data: Buffer) -> int:
         endpoint = self._check()
         data = bytes(data)
         endpoint.receive(data)

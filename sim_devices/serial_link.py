@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 import threading
 from collections import deque
+from typing import Protocol
 
 import numpy as np
 
@@ -156,12 +157,29 @@ class LineEndpoint:
 
 
 # -- in-process endpoint registry ---------------------------------------------------------------------------
-_ENDPOINTS: dict[str, LineEndpoint] = {}
+class SerialEndpoint(Protocol):
+    """What a port (the `hamrsim://` handler) asks of the device side; `LineEndpoint` is one, a recorded
+    conversation served back (`traffic_replay.TrafficReplayEndpoint`) another."""
+
+    clock: Clock
+
+    def is_connected(self, time_s: float | None = None) -> bool: ...
+
+    def receive(self, data: bytes) -> None: ...
+
+    def output_until(self, time_s: float) -> bytes: ...
+
+    def next_output_s(self) -> float | None: ...
+
+    def discard_output(self) -> None: ...
+
+
+_ENDPOINTS: dict[str, SerialEndpoint] = {}
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 _REGISTRY_LOCK = threading.Lock()
 
 
-def register_endpoint(name: str, endpoint: LineEndpoint, replace: bool = False) -> str:
+def register_endpoint(name: str, endpoint: SerialEndpoint, replace: bool = False) -> str:
     """Make `endpoint` reachable as `hamrsim://NAME` and return that URL."""
     if not _NAME.match(name):
         raise ConfigError(f"simulated port name {name!r}: use letters, digits, '_', '.', '-'")
@@ -178,7 +196,7 @@ def unregister_endpoint(name: str) -> None:
         _ENDPOINTS.pop(name, None)
 
 
-def get_endpoint(name: str) -> LineEndpoint | None:
+def get_endpoint(name: str) -> SerialEndpoint | None:
     with _REGISTRY_LOCK:
         return _ENDPOINTS.get(name)
 

@@ -118,7 +118,7 @@ class TrafficReplayEndpoint:
 
 def traffic_topics(path: Path | str) -> list[str]:
     from hamr_bench.recording import RecordingReader
-    from hamr_bench.recording.schemas import TRAFFIC_PREFIX
+    from hamr_bench.recording.contract import TRAFFIC_PREFIX
 
     return sorted(t for t in RecordingReader(path).topics() if t.startswith(TRAFFIC_PREFIX))
 

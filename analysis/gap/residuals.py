@@ -63,8 +63,8 @@ def regions(problem: Problem, z: np.ndarray, by_phase: bool = False) -> list[Reg
         key = (r.protocol, condition_label(problem, i), r.quantity) + ((r.phase,) if by_phase else ())
         keys.setdefault(key, []).append(i)
     out = []
-    for key, idx in keys.items():
-        idx = np.array(idx)
+    for key, members in keys.items():
+        idx = np.array(members)
         resid = z[idx] * problem.sigma[idx]
         out.append(Region(protocol=key[0], condition=key[1] + (f", {key[3]}" if by_phase else ""), quantity=key[2],
                           rows=idx, rms_gap=float(np.sqrt(np.mean(resid ** 2))),

@@ -102,7 +102,7 @@ def run_leg(args: argparse.Namespace) -> int:
         V, S = np.meshgrid(np.asarray(volts, float), np.asarray(sags, float), indexing="ij")
         F = p.blocked_force_N(V, S, friction_mu=args.friction_mu)
         points = [dict(voltage_V=float(v), sag_m=float(s), force_N=float(f))
-                  for v, s, f in zip(V.ravel(), S.ravel(), F.ravel())]
+                  for v, s, f in zip(V.ravel(), S.ravel(), F.ravel(), strict=True)]
         meta["convention"] = "V_drive = V_bias = voltage; sensor raised sag_m above the undriven neutral"
         meta["friction_mu"] = args.friction_mu
     elif args.test == "free-displacement":
@@ -110,7 +110,7 @@ def run_leg(args: argparse.Namespace) -> int:
         _check_voltages(volts, args.voltage_limit)
         v = np.asarray(volts, float)
         d = p.free_displacement_m(v)
-        points = [dict(voltage_V=float(a), displacement_m=float(b)) for a, b in zip(v, d)]
+        points = [dict(voltage_V=float(a), displacement_m=float(b)) for a, b in zip(v, d, strict=True)]
         meta["convention"] = "one-sided downward stroke from the undriven neutral, V_drive = V_bias"
     else:
         forces = args.force if args.force is not None else [10.6e-3 / 4]
@@ -118,7 +118,7 @@ def run_leg(args: argparse.Namespace) -> int:
         if np.any(~np.isfinite(f)):
             raise ConfigError("--force must be finite")
         d = p.static_displacement_m(f)
-        points = [dict(force_N=float(a), displacement_m=float(b)) for a, b in zip(f, d)]
+        points = [dict(force_N=float(a), displacement_m=float(b)) for a, b in zip(f, d, strict=True)]
         meta["convention"] = "actuator undriven; displacement_m = sag (foot pushed up) under a downward force_N; " \
                              "NaN if the leg collapses"
     _emit(points, args.json, meta)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from hamr_bench.errors import ConfigError
 from hamr_bench.backends import traffic_test_export
+from hamr_bench.recording.contract import TRAFFIC_PREFIX
 
 # Which driver speaks on a traffic topic, from the device name the rig builder gives it.
 _DRIVER_OF_DEVICE = {"stage": "smc100", "force_sensor": "loadstar"}
@@ -22,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export = sub.add_parser(
         "export",
         help="write one device's recorded conversation as a byte-exact driver test file",
-        description="Read /traffic/DEVICE of a recording made with --record-traffic and write the driver "
+        description=f"Read {TRAFFIC_PREFIX}DEVICE of a recording made with --record-traffic and write the driver "
         "calls it holds, each with its (sent, reply) exchanges, as JSON. tests/drivers/test_recorded_traffic.py "
         "replays every file in tests/drivers/traffic/ against the real driver and the emulator.",
     )
@@ -40,9 +41,9 @@ def run_export(args: argparse.Namespace) -> int:
     if not args.recording.exists():
         raise ConfigError(f"{args.recording}: no such recording")
     reader = RecordingReader(args.recording)
-    topic = f"/traffic/{args.device}"
+    topic = f"{TRAFFIC_PREFIX}{args.device}"
     if topic not in reader.topics():
-        found = ", ".join(t for t in reader.topics() if t.startswith("/traffic/")) or "none"
+        found = ", ".join(t for t in reader.topics() if t.startswith(TRAFFIC_PREFIX)) or "none"
         hint = f"record the run with --record-traffic; traffic topics: {found}"
         raise ConfigError(f"{args.recording}: no {topic} ({hint})")
     export = traffic_test_export()

@@ -23,8 +23,9 @@ Units SI throughout: m, N, V, kg, Pa, m/V.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -132,7 +133,7 @@ def actuator_preset(layers: int, params: str = "effective") -> ActuatorParams:
     return ActuatorParams(layers=layers, cf_thickness_m=layers * cf_layer, label=f"{layers}x {params}", **t)
 
 
-def with_changes(p: ActuatorParams, **changes: float) -> ActuatorParams:
+def with_changes(p: ActuatorParams, **changes: Any) -> ActuatorParams:
     """A copy with some fields changed (validated again)."""
     return replace(p, **changes)
 
@@ -157,9 +158,9 @@ def geometric_factor_force(width_ratio: float, length_ratio: float) -> float:
         x = 0.5 * (x + 1.0)
         wq = 0.5 * wq
         Lp = 1.0 + lr
-        num = np.sum(wq * (Lp - x))
-        den = np.sum(wq * (Lp - x) ** 2 / (wr + 2.0 * (1.0 - wr) * x))
-        return float(num / den / 1.5)
+        num = float(np.sum(wq * (Lp - x)))
+        den = float(np.sum(wq * (Lp - x) ** 2 / (wr + 2.0 * (1.0 - wr) * x)))
+        return num / den / 1.5
     num = 8.0 * (1.0 - wr) ** 3 * (1.0 + 2.0 * lr)
     den = (-6.0 * (wr - 1.0) * (-3.0 + 4.0 * lr * (wr - 1.0) + 2.0 * wr)
            + 3.0 * (-2.0 + 2.0 * lr * (wr - 1.0) + wr) ** 2 * np.log((2.0 - wr) / wr))

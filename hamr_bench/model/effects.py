@@ -27,8 +27,8 @@ Effects defined outside `hamr_bench.model` only need to subclass `Effect` (or du
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 

@@ -25,8 +25,7 @@ on a coarse grid across the linkage's range, the stable crossing (G from - to +)
 
 from __future__ import annotations
 
-
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -35,8 +34,8 @@ from hamr_bench.errors import ModelError
 from hamr_bench.model import actuator as act
 from hamr_bench.model import transmission as tr
 from hamr_bench.model.actuator import ActuatorParams, actuator_preset
-from hamr_bench.model.designs import DesignParams, design_preset
 from hamr_bench.model.contact import PRESSING, friction_reading_ratio
+from hamr_bench.model.designs import DesignParams, design_preset
 from hamr_bench.model.effects import Effect, active, apply_voltage_series
 from hamr_bench.model.flexures import SerialChain
 
@@ -201,7 +200,7 @@ class Powertrain:
         hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
         return float(th[lo]), float(th[hi])
 
-    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray) -> np.ndarray:
+    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
         """U'(theta) - load h'(theta), one fused pass (same equations as transmission.py, constants cached)."""
         g = self.geometry
         r, e, l = g.crank_m, g.offset_m, self.coupler_m

@@ -34,6 +34,8 @@ from pathlib import Path
 from typing import Any
 
 from hamr_bench import backends
+from hamr_bench.recording.contract import TRAFFIC_PREFIX, MetadataName
+from hamr_bench.recording.run_metadata import RunMetadata
 from hamr_bench.errors import ConfigError, SafetyLimitError
 from hamr_bench.protocols.contact import FORCE_WINDOW_S
 from hamr_bench.protocols.plan import Drive, Home, Plan, ReadStage, RecordEvent
@@ -210,21 +212,16 @@ def run_replay(req: ReplayRequest) -> RunResult:
         recorder.close("failed", f"rig could not be built: {exc}")
         raise
     try:
-        recorder.add_metadata("rig", {"name": rig.name, "path": rig.source_path, "text": rig.source_text,
-                                      "kind": "sim"})
-        recorder.add_metadata("design", {
-            "design": "" if req.design is None or req.fixture != "leg" else str(req.design),
-            "layers": str(req.layers), "fixture": req.fixture,
-            "params_set": rig.settings.get("params_set", "effective"),
-            "model_params": json.dumps(rig.settings.get("model_params", {}))})
-        recorder.add_metadata("protocol", {"name": req.protocol, "params": req.protocol_params_json,
-                                           "protocol_file": ""})
-        recorder.add_metadata("software", software_versions())
-        recorder.add_metadata("run", {
-            "seed": str(req.seed), "clock": "virtual", "effects": json.dumps(req.effects), "faults": "[]",
-            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            **{k: str(v) for k, v in rig.settings.get("run_metadata", {}).items()}})
-        recorder.add_metadata("replay", dict(req.replay_metadata))
+        RunMetadata(
+            rig_name=rig.name, rig_path=rig.source_path, rig_text=rig.source_text, rig_kind="sim",
+            design=req.design if req.fixture == "leg" else None, layers=req.layers, fixture=req.fixture,
+            params_set=rig.settings.get("params_set", "effective"), model_params=rig.settings.get("model_params", {}),
+            protocol=req.protocol, protocol_params=_params_of_source(req), software=software_versions(),
+            seed=str(req.seed), clock="virtual", effects=dict(req.effects), faults=(),
+            started_utc=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            run_extra={k: str(v) for k, v in rig.settings.get("run_metadata", {}).items()},
+        ).write(recorder)
+        recorder.add_metadata(MetadataName.REPLAY, dict(req.replay_metadata))
         progress = None if req.quiet or not req.step_count else TqdmProgress(req.step_count, f"replay {req.protocol}")
         if req.traffic_from:
             # Against recorded traffic the drivers must make the very calls the source run made, so the source's
@@ -258,6 +255,18 @@ def run_replay(req: ReplayRequest) -> RunResult:
     return result
 
 
+def _params_of_source(req: ReplayRequest) -> dict[str, Any]:
+    """The source run's protocol parameters (its metadata's JSON object), recorded again as the twin's."""
+    try:
+        params = json.loads(req.protocol_params_json)
+    except ValueError:
+        params = None
+    if not isinstance(params, dict):
+        raise ConfigError(f"replay: the source's protocol parameters are not a JSON object: "
+                          f"{req.protocol_params_json[:80]!r}")
+    return params
+
+
 def _traffic_ports(source: Path, served: list[tuple[str, Any]]) -> dict[str, Callable[[Any], str]]:
     """Port factories for the rig: each serial role with a recorded /traffic stream is served from it."""
     server = backends.traffic_server()
@@ -274,6 +283,6 @@ def _traffic_ports(source: Path, served: list[tuple[str, Any]]) -> dict[str, Cal
 
         ports[role] = make_port
     if not ports:
-        raise ConfigError(f"{source}: no /traffic/<device> streams of a serial device to serve (record the run "
+        raise ConfigError(f"{source}: no {TRAFFIC_PREFIX}<device> streams of a serial device to serve (record the run "
                           "with --record-traffic)")
     return ports

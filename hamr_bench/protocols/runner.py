@@ -472,7 +472,7 @@ class Runner:
             samples = self.rig.force_sensor.read_stream()
         except DeviceError as exc:
             # Good readings taken before the fault in the same batch (drivers attach them) are kept.
-            for sample in getattr(exc, "samples_before", ()):
+            for sample in exc.samples_before:
                 self.rec.write_scalar(Topic.FORCE, sample.time_s, force_N=sample.force_N)
             raise
         for sample in samples:

@@ -15,6 +15,7 @@ from hamr_bench import __version__
 from hamr_bench.protocols import get_protocol
 from hamr_bench.protocols.params import as_dict, load_params
 from hamr_bench.protocols.runner import RunResult, Runner
+from hamr_bench.recording.run_metadata import RunMetadata
 from hamr_bench.rig import load_rig, sim_rig_path
 
 
@@ -108,23 +109,17 @@ def run_protocol(req: RunRequest) -> RunResult:
 
 
 def _write_metadata(recorder: Any, req: RunRequest, protocol: Any, params: Any, rig: Any) -> None:
-    recorder.add_metadata("rig", {
-        "name": rig.name, "path": rig.source_path, "text": rig.source_text,
-        "kind": "sim" if rig.is_simulated else "real"})
-    recorder.add_metadata("design", {
-        "design": str(req.design) if protocol.FIXTURE == "leg" else "",
-        "layers": str(req.layers), "fixture": protocol.FIXTURE,
-        "params_set": rig.settings.get("params_set", "effective"),
-        "model_params": json.dumps(rig.settings.get("model_params", {}))})
-    recorder.add_metadata("protocol", {
-        "name": protocol.NAME, "params": json.dumps(as_dict(params)),
-        "protocol_file": str(req.protocol_file or "")})
-    recorder.add_metadata("software", software_versions())
-    recorder.add_metadata("run", {
-        "seed": str(req.seed), "clock": "virtual" if rig.clock.is_virtual else "real",
-        "effects": json.dumps(req.effects), "faults": json.dumps(req.faults),
-        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        **{k: str(v) for k, v in rig.settings.get("run_metadata", {}).items()}})
+    RunMetadata(
+        rig_name=rig.name, rig_path=rig.source_path, rig_text=rig.source_text,
+        rig_kind="sim" if rig.is_simulated else "real",
+        design=req.design if protocol.FIXTURE == "leg" else None, layers=req.layers, fixture=protocol.FIXTURE,
+        params_set=rig.settings.get("params_set", "effective"), model_params=rig.settings.get("model_params", {}),
+        protocol=protocol.NAME, protocol_params=as_dict(params), protocol_file=str(req.protocol_file or ""),
+        software=software_versions(),
+        seed=str(req.seed), clock="virtual" if rig.clock.is_virtual else "real", effects=dict(req.effects),
+        faults=tuple(req.faults), started_utc=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        run_extra={k: str(v) for k, v in rig.settings.get("run_metadata", {}).items()},
+    ).write(recorder)
     for name, values in req.extra_metadata.items():
         recorder.add_metadata(name, values)
 

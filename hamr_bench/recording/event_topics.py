@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from hamr_bench.recording import schemas
+from hamr_bench.recording.contract import EventKind
 
 # foxglove.Log levels (its Level enum)
 _INFO, _WARNING, _ERROR = 2, 3, 4
@@ -37,7 +38,7 @@ def log_text(kind: str, step: int, message: str, data: Mapping[str, Any]) -> str
 
 
 def log_level(kind: str, data: Mapping[str, Any]) -> int:
-    if kind == "run_end":
+    if kind == EventKind.RUN_END:
         return _LEVEL_OF_EXIT.get(str(data.get("exit_status", "")), _INFO)
     return _INFO
 

@@ -79,8 +79,9 @@ def encode_image(image: np.ndarray, image_format: str) -> bytes:
 
 
 # foxglove.RawImage pixel encodings (ROS conventions) of the arrays a camera driver gives: grey 8/16 bit, OpenCV BGR.
-_RAW_ENCODING = {(2, np.dtype(np.uint8)): "mono8", (2, np.dtype(np.uint16)): "mono16",
-                 (3, np.dtype(np.uint8)): "bgr8", (3, np.dtype(np.uint16)): "bgr16"}
+_RAW_ENCODING: dict[tuple[int, np.dtype], str] = {
+    (2, np.dtype(np.uint8)): "mono8", (2, np.dtype(np.uint16)): "mono16",
+    (3, np.dtype(np.uint8)): "bgr8", (3, np.dtype(np.uint16)): "bgr16"}
 _RAW_LAYOUT = {name: (dtype, ndim) for (ndim, dtype), name in _RAW_ENCODING.items()}
 
 

@@ -18,8 +18,9 @@ records among the messages, log times past int64) is handed back to the reader t
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -127,7 +128,7 @@ class ChannelRun:
 
     __slots__ = ("channel_id", "log_times", "chunk_offsets", "_buf", "_starts", "_ends")
 
-    def __init__(self, channel_id: int, log_times: np.ndarray, chunk_offsets: np.ndarray, buf: np.ndarray | None,
+    def __init__(self, channel_id: int, log_times: np.ndarray, chunk_offsets: np.ndarray, buf: np.ndarray,
                  starts: np.ndarray, ends: np.ndarray) -> None:
         self.channel_id = channel_id
         self.log_times = log_times  # int64 ns
@@ -148,7 +149,7 @@ def _payloads(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarr
         if size == 0:
             return np.zeros((len(sizes), 0), dtype=np.uint8)
         return sliding_window_view(buf, size)[starts]
-    return [buf[a:b].tobytes() for a, b in zip(starts.tolist(), ends.tolist())]
+    return [buf[a:b].tobytes() for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
 
 
 class IndexBatch:
@@ -213,7 +214,7 @@ class IndexBatch:
             cuts = np.flatnonzero((segment[1:] != segment[:-1]) | (channel[1:] != channel[:-1])) + 1
             bounds = [0, *cuts.tolist(), len(order)]
             runs_by_segment: dict[int, list[ChannelRun]] = {}
-            for a, b in zip(bounds[:-1], bounds[1:]):
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
                 rows = order[a:b]
                 runs_by_segment.setdefault(int(segment[a]), []).append(ChannelRun(
                     int(channel[a]), log_time[rows], chunk_off[rows], buf, start[rows], end[rows]))

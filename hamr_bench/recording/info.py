@@ -12,16 +12,17 @@ from pathlib import Path
 from typing import Any
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording.contract import MetadataName
 from hamr_bench.recording.reader import RecordingReader, RecordingWarning
 
 # Metadata keys shown in the text summary, per record; anything else is in --json.
 _HIGHLIGHTS = {
-    "run_end": ("exit_status", "reason", "dropped_total", "end_time_utc", "recovered"),
-    "run": ("seed", "clock", "started_utc", "source"),
-    "rig": ("name", "kind", "path"),
-    "design": ("design", "layers", "fixture", "params_set"),
-    "protocol": ("name", "protocol_file"),
-    "software": ("hamr_bench", "python", "numpy", "mcap"),
+    MetadataName.RUN_END: ("exit_status", "reason", "dropped_total", "end_time_utc", "recovered"),
+    MetadataName.RUN: ("seed", "clock", "started_utc", "source"),
+    MetadataName.RIG: ("name", "kind", "path"),
+    MetadataName.DESIGN: ("design", "layers", "fixture", "params_set"),
+    MetadataName.PROTOCOL: ("name", "protocol_file"),
+    MetadataName.SOFTWARE: ("hamr_bench", "python", "numpy", "mcap"),
 }
 
 
@@ -38,6 +39,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
             crc_error = str(exc)
             reader = RecordingReader(path, validate_crcs=False)
     status = reader.status
+    crc: dict[str, Any]
     if crc_error is not None:
         crc = {"result": "failed", "error": crc_error}
     else:
@@ -48,7 +50,8 @@ def summarise(path: Path | str) -> dict[str, Any]:
             "summary_section": status.summary_crc,
         }
     topics = []
-    first_times, last_times = [], []
+    first_times: list[float] = []
+    last_times: list[float] = []
     for info in reader.topics().values():
         topics.append(
             {
@@ -60,7 +63,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
                 "last_time_s": info.last_time_s,
             }
         )
-        if info.first_time_s is not None:
+        if info.first_time_s is not None and info.last_time_s is not None:
             first_times.append(info.first_time_s)
             last_times.append(info.last_time_s)
     metadata = reader.metadata()
@@ -73,7 +76,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
         "crc": crc,
         "exit_status": reader.exit_status,
         "reason": reader.exit_reason,
-        "start_time_utc": metadata.get("recording", {}).get("start_time_utc"),
+        "start_time_utc": metadata.get(MetadataName.RECORDING, {}).get("start_time_utc"),
         "time_span_s": [min(first_times), max(last_times)] if first_times else None,
         "messages": sum(t["messages"] for t in topics),
         "topics": topics,

@@ -22,6 +22,7 @@ import numpy as np
 
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
+from hamr_bench.recording.contract import MetadataName, Topic
 from hamr_bench.recording.index_scan import (
     SMALL_CHUNK,
     BATCH_BYTES,
@@ -38,6 +39,7 @@ from hamr_bench.recording.scan import (
     ChannelRecord,
     MessageRecord,
     MetadataRecord,
+    Policy,
     SchemaRecord,
     ScanStatus,
     read_chunk_messages,
@@ -151,7 +153,7 @@ class RecordingReader:
         self.chunks_indexed = 0  # chunks whose messages were taken through their message indexes
 
     def _load(self, indexed: bool) -> None:
-        policy = "strict" if self.validate_crcs else "lenient"
+        policy: Policy = "strict" if self.validate_crcs else "lenient"
         if not indexed:
             for record in scan(self.path, policy, self.status):
                 self._take(record)
@@ -160,13 +162,13 @@ class RecordingReader:
         # later message is taken (a schema, a channel, a message outside the batch) and at the end.
         batch = IndexBatch()
         try:
-            for record in scan_indexed(self.path, policy, self.status):
-                if isinstance(record, ChunkCandidate):
-                    self._add_chunk(batch, record)
+            for item in scan_indexed(self.path, policy, self.status):
+                if isinstance(item, ChunkCandidate):
+                    self._add_chunk(batch, item)
                     continue
-                if len(batch) and not isinstance(record, MetadataRecord):
+                if len(batch) and not isinstance(item, MetadataRecord):
                     self._drain(batch)
-                self._take(record)
+                self._take(item)
         except RecordingError:
             # The plain scan would have walked the waiting chunks before failing here: if one of them does not
             # pass, that walk might have failed first, with another message.
@@ -266,11 +268,11 @@ class RecordingReader:
     @property
     def exit_status(self) -> str | None:
         """'success' | 'aborted' | 'failed', or None if the run never recorded its end (killed writer)."""
-        return self._metadata.get("run_end", {}).get("exit_status")
+        return self._metadata.get(MetadataName.RUN_END, {}).get("exit_status")
 
     @property
     def exit_reason(self) -> str | None:
-        return self._metadata.get("run_end", {}).get("reason")
+        return self._metadata.get(MetadataName.RUN_END, {}).get("reason")
 
     def topics(self) -> dict[str, TopicInfo]:
         out: dict[str, TopicInfo] = {}
@@ -301,7 +303,7 @@ class RecordingReader:
             if schema is not None and schema.encoding == "protobuf"
             else None
         )
-        if fields is None:
+        if fields is None or schema is None:
             raise RecordingError(
                 f"{self.path}: topic {topic} is not a scalar stream (schema {self._schema_name(channel.id)})"
             )
@@ -326,12 +328,12 @@ class RecordingReader:
         return {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
 
     def events(self) -> list[Event]:
-        if schemas.EVENTS_TOPIC not in self._by_topic:
+        if Topic.EVENTS not in self._by_topic:
             return []
-        cls = self._message_class(schemas.EVENTS_TOPIC)
+        cls = self._message_class(Topic.EVENTS)
         out = []
-        for payload in self._stream(schemas.EVENTS_TOPIC).payloads():
-            msg = self._parse(cls, payload, schemas.EVENTS_TOPIC)
+        for payload in self._stream(Topic.EVENTS).payloads():
+            msg = self._parse(cls, payload, Topic.EVENTS)
             try:
                 data = json.loads(msg.data) if msg.data else {}
             except ValueError:
@@ -348,7 +350,7 @@ class RecordingReader:
             for m in (self._parse(cls, p, topic) for p in self._stream(topic).payloads())
         ]
 
-    def images(self, topic: str = "/camera/image") -> Iterator[Image]:
+    def images(self, topic: str = Topic.CAMERA_IMAGE) -> Iterator[Image]:
         """Frames in file order, read from disk chunk by chunk."""
         channel = self._channel(topic)
         schema_name = self._schema_name(channel.id)
@@ -391,7 +393,7 @@ class RecordingReader:
     # ------------------------------------------------------------------ helpers
 
     def _start_time_ns(self) -> int:
-        value = self._metadata.get("recording", {}).get("start_time_ns")
+        value = self._metadata.get(MetadataName.RECORDING, {}).get("start_time_ns")
         if value is not None:
             try:
                 return int(value)

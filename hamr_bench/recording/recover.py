@@ -14,6 +14,7 @@ from pathlib import Path
 
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import schemas
+from hamr_bench.recording.contract import MetadataName
 from hamr_bench.recording.mcap_file import McapFileWriter
 from hamr_bench.recording.scan import (
     ChannelRecord,
@@ -111,11 +112,11 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                     stored_channels.add(channel_keys[channel_key])
             channel_ids[record.id] = channel_keys[channel_key]
         elif isinstance(record, MetadataRecord):
-            if record.name == "run_end":
+            if record.name == MetadataName.RUN_END:
                 source_run_end = dict(record.values)
                 return
             values = dict(record.values)
-            if record.name == "recording" and "start_time_ns" in values:
+            if record.name == MetadataName.RECORDING and "start_time_ns" in values:
                 try:
                     start_time_ns = int(values["start_time_ns"])
                 except ValueError:
@@ -155,8 +156,8 @@ def recover(src: Path | str, dst: Path | str, *, overwrite: bool = False) -> Rec
                 "recover_damaged_metadata": ",".join(damaged),
             }
         )
-        writer.add_metadata("run_end", run_end)
-        metadata_names.append("run_end")
+        writer.add_metadata(MetadataName.RUN_END, run_end)
+        metadata_names.append(MetadataName.RUN_END)
         writer.finish()
         out.flush()
         os.fsync(out.fileno())

@@ -17,7 +17,7 @@ from hamr_bench.errors import RecordingError
 from hamr_bench.recording.contract import MetadataName
 
 # keys of the `run` record this class knows; any other key is kept in `run_extra`
-_RUN_KEYS = ("seed", "clock", "effects", "started_utc", "source", "imported_from", "session")
+_RUN_KEYS = ("seed", "clock", "effects", "faults", "started_utc", "source", "imported_from", "session")
 
 
 @dataclass(frozen=True)
@@ -40,11 +40,13 @@ class RunMetadata:
     seed: str = ""
     clock: str = ""
     effects: dict[str, Any] = field(default_factory=dict)
+    faults: tuple[str, ...] | None = None  # the faults injected (a run records them, even none); None: not said
     started_utc: str = ""
     source: str = "recorded"       # recorded | import-trace | import-points | synthetic ...
     imported_from: str = ""
     session: str = ""              # the session label given at import ("" = none given)
     run_extra: dict[str, str] = field(default_factory=dict)
+    software: dict[str, str] = field(default_factory=dict)  # package -> version (the `software` record)
 
     @property
     def fixture_kind(self) -> str:
@@ -59,8 +61,14 @@ class RunMetadata:
 
     # ------------------------------------------------------------------------------------------- writing
     def records(self) -> list[tuple[str, dict[str, str]]]:
-        """The metadata records, in the order a run writes them (rig, design, protocol, run)."""
-        run = {"seed": self.seed, "clock": self.clock, "effects": json.dumps(self.effects), "source": self.source}
+        """The metadata records, in the order a run writes them (rig, design, protocol, software, run); optional
+        keys and the software record are written only when they say something ("recorded" is the source a record
+        without one reads as)."""
+        run = {"seed": self.seed, "clock": self.clock, "effects": json.dumps(self.effects)}
+        if self.faults is not None:
+            run["faults"] = json.dumps(list(self.faults))
+        if self.source != "recorded":
+            run["source"] = self.source
         if self.started_utc:
             run["started_utc"] = self.started_utc
         if self.imported_from:
@@ -68,7 +76,7 @@ class RunMetadata:
         if self.session:
             run["session"] = self.session
         run.update({k: str(v) for k, v in self.run_extra.items()})
-        return [
+        records: list[tuple[str, dict[str, str]]] = [
             (MetadataName.RIG, {"name": self.rig_name, "path": self.rig_path, "text": self.rig_text,
                                 "kind": self.rig_kind}),
             (MetadataName.DESIGN, {"design": "" if self.design is None else str(self.design),
@@ -76,13 +84,15 @@ class RunMetadata:
                                    "params_set": self.params_set, "model_params": json.dumps(self.model_params)}),
             (MetadataName.PROTOCOL, {"name": self.protocol, "params": json.dumps(self.protocol_params),
                                      "protocol_file": self.protocol_file}),
-            (MetadataName.RUN, run),
         ]
+        if self.software:
+            records.append((MetadataName.SOFTWARE, dict(self.software)))
+        return [*records, (MetadataName.RUN, run)]
 
     def write(self, recorder: Any) -> None:
         """Add the records to an open `Recorder`."""
         for name, values in self.records():
-            recorder.add_metadata(str(name), values)
+            recorder.add_metadata(name, values)
 
     # ------------------------------------------------------------------------------------------- reading
     @classmethod
@@ -116,9 +126,23 @@ class RunMetadata:
             rig_kind=rig_md.get("kind", ""),
             seed=run_md.get("seed", ""), clock=run_md.get("clock", ""),
             effects=_json(run_md.get("effects"), f"{where}: metadata run.effects"),
+            faults=_faults(run_md.get("faults"), f"{where}: metadata run.faults"),
             started_utc=run_md.get("started_utc", ""), source=run_md.get("source", "recorded") or "recorded",
             imported_from=run_md.get("imported_from", ""), session=run_md.get("session", ""),
-            run_extra={k: v for k, v in run_md.items() if k not in _RUN_KEYS})
+            run_extra={k: v for k, v in run_md.items() if k not in _RUN_KEYS},
+            software=dict(metadata.get(MetadataName.SOFTWARE, {})))
+
+
+def _faults(value: str | None, where: str) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    try:
+        out = json.loads(value)
+    except ValueError:
+        raise RecordingError(f"{where} is not JSON") from None
+    if not isinstance(out, list) or not all(isinstance(f, str) for f in out):
+        raise RecordingError(f"{where} is not a JSON list of fault names")
+    return tuple(out)
 
 
 def _json(value: str | None, where: str) -> dict[str, Any]:

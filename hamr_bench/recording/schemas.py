@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import re
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache, lru_cache
-from typing import Any, Callable
+from typing import Any
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from hamr_bench.errors import RecordingError
+from hamr_bench.recording.contract import TRAFFIC_PREFIX, Topic
 
 PACKAGE = "hamr_bench"
 IMAGE_SCHEMA = "foxglove.CompressedImage"
@@ -31,10 +33,8 @@ TRAFFIC_SCHEMA = f"{PACKAGE}.SerialTraffic"
 LOG_SCHEMA = "foxglove.Log"
 ANNOTATIONS_SCHEMA = "foxglove.ImageAnnotations"
 STEP_SCHEMA = f"{PACKAGE}.StepCondition"
-EVENTS_TOPIC = "/events"
-TRAFFIC_PREFIX = "/traffic/"
 # Topics the recorder writes itself, never as plain scalars (format 2 adds the last five).
-RESERVED_TOPICS = ("/events", "/camera/image", "/log", "/step", "/camera/roi", "/camera/annotations")
+RESERVED_TOPICS = (Topic.EVENTS, Topic.CAMERA_IMAGE, Topic.LOG, Topic.STEP, Topic.CAMERA_ROI, Topic.CAMERA_ANNOTATIONS)
 
 _FDP = descriptor_pb2.FieldDescriptorProto
 # Only field numbers 1..15 have a one-byte tag; the fixed-layout fast path relies on that.
@@ -94,7 +94,7 @@ class ScalarSchema:
         return pack_n
 
 
-@lru_cache(maxsize=None)
+@cache
 def _scalar_struct(n_fields: int) -> struct.Struct:
     return struct.Struct("<" + "Bd" * n_fields)
 
@@ -108,15 +108,15 @@ CAMERA_DISPLACEMENT = ScalarSchema(f"{PACKAGE}.CameraDisplacement", ("displaceme
 IMAGE_REGION = ScalarSchema(f"{PACKAGE}.ImageRegion", ("x0_px", "y0_px"))
 
 KNOWN_SCALAR_TOPICS: dict[str, ScalarSchema] = {
-    "/force": FORCE,
-    "/stage/position": STAGE_POSITION,
-    "/stage/command": STAGE_COMMAND,
-    "/amplifier/bias/command": VOLTAGE,
-    "/amplifier/drive/command": VOLTAGE,
-    "/amplifier/bias/monitor": VOLTAGE,
-    "/amplifier/drive/monitor": VOLTAGE,
-    "/camera/displacement": CAMERA_DISPLACEMENT,
-    "/camera/roi/origin": IMAGE_REGION,
+    Topic.FORCE: FORCE,
+    Topic.STAGE_POSITION: STAGE_POSITION,
+    Topic.STAGE_COMMAND: STAGE_COMMAND,
+    Topic.BIAS_COMMAND: VOLTAGE,
+    Topic.DRIVE_COMMAND: VOLTAGE,
+    Topic.BIAS_MONITOR: VOLTAGE,
+    Topic.DRIVE_MONITOR: VOLTAGE,
+    Topic.CAMERA_DISPLACEMENT: CAMERA_DISPLACEMENT,
+    Topic.CAMERA_ROI_ORIGIN: IMAGE_REGION,
 }
 
 # Unit suffixes of field names (docs/log-format.md, "Units"): a field `name_<suffix>` is in that unit.
@@ -156,7 +156,7 @@ def scalar_schema_for(topic: str, field_names: tuple[str, ...]) -> ScalarSchema:
                 f"topic {topic} takes fields {', '.join(known.fields)}; got {', '.join(field_names) or 'none'}"
             )
         return known
-    if topic in RESERVED_TOPICS or topic.startswith(TRAFFIC_PREFIX) or topic.startswith("/camera/image"):
+    if topic in RESERVED_TOPICS or topic.startswith(TRAFFIC_PREFIX) or topic.startswith(Topic.CAMERA_IMAGE):
         raise RecordingError(f"topic {topic} is reserved for events, logs, steps, traffic or images, not scalars")
     if not field_names:
         raise RecordingError(f"topic {topic}: a scalar sample needs at least one field (e.g. force_N=0.1)")
@@ -231,17 +231,17 @@ def annotations_descriptor_set() -> bytes:
     return build_file_descriptor_set(ImageAnnotations).SerializeToString()
 
 
-@lru_cache(maxsize=None)
+@cache
 def event_descriptor_set() -> bytes:
     return _message_descriptor_set(EVENT_SCHEMA, EVENT_FIELDS)
 
 
-@lru_cache(maxsize=None)
+@cache
 def traffic_descriptor_set() -> bytes:
     return _message_descriptor_set(TRAFFIC_SCHEMA, TRAFFIC_FIELDS)
 
 
-@lru_cache(maxsize=None)
+@cache
 def image_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
     from mcap_protobuf.schema import build_file_descriptor_set
@@ -249,7 +249,7 @@ def image_descriptor_set() -> bytes:
     return build_file_descriptor_set(CompressedImage).SerializeToString()
 
 
-@lru_cache(maxsize=None)
+@cache
 def raw_image_descriptor_set() -> bytes:
     from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
     from mcap_protobuf.schema import build_file_descriptor_set

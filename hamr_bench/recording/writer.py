@@ -43,7 +43,7 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -52,12 +52,13 @@ import numpy as np
 from hamr_bench.errors import RecordingError
 from hamr_bench.recording import event_topics, schemas
 from hamr_bench.recording.camera_storage import CameraStorage, FramePlanner, marker_annotation_payload
-from hamr_bench.recording.contract import EventKind, Topic
+from hamr_bench.recording.contract import TRAFFIC_PREFIX, EventKind, MetadataName, Topic
 from hamr_bench.recording.image_payloads import compressed_image_payload, raw_image_payload
 from hamr_bench.recording.images import encode_image, raw_image_fields
 from hamr_bench.recording.mcap_file import McapFileWriter
 from hamr_bench.recording.reorder import ReorderStage
 from hamr_bench.recording.tap import RecorderTap, TapChannel
+import contextlib
 
 EXIT_STATUSES = ("success", "aborted", "failed")
 FORMAT_NAME = "hamr-bench-recording"
@@ -204,10 +205,10 @@ class Recorder:
 
         self._thread = threading.Thread(target=self._run, name=f"recorder:{self.path.name}", daemon=True)
         self._thread.start()
-        start_utc = datetime.fromtimestamp(self.start_time_ns / 1e9, tz=timezone.utc).isoformat()
+        start_utc = datetime.fromtimestamp(self.start_time_ns / 1e9, tz=UTC).isoformat()
         try:
             self.add_metadata(
-                "recording",
+                MetadataName.RECORDING,
                 {
                     "format": FORMAT_NAME,
                     "format_version": FORMAT_VERSION,
@@ -260,8 +261,8 @@ class Recorder:
     def write_event(self, time_s: float, kind: str, step: int, message: str = "", **data: Any) -> None:
         """A protocol event on /events (`data` stored as a JSON object), the same as a `foxglove.Log` line on /log,
         and for a `step` event its condition as typed fields on /step (event_topics.py)."""
-        channel = self._channels.get(schemas.EVENTS_TOPIC) or self._register_special(
-            schemas.EVENTS_TOPIC, schemas.EVENT_SCHEMA, schemas.event_descriptor_set(), ("time_s",)
+        channel = self._channels.get(Topic.EVENTS) or self._register_special(
+            Topic.EVENTS, schemas.EVENT_SCHEMA, schemas.event_descriptor_set(), ("time_s",)
         )
         try:
             data_json = json.dumps(data, sort_keys=True, default=_json_default)
@@ -373,8 +374,8 @@ class Recorder:
 
     def write_bytes(self, topic: str, time_s: float, direction: str, data: bytes) -> None:
         """Raw serial traffic of one device on `/traffic/<device>`; direction 'tx' (to device) or 'rx'."""
-        if not topic.startswith(schemas.TRAFFIC_PREFIX):
-            raise RecordingError(f"traffic topic {topic!r} must start with {schemas.TRAFFIC_PREFIX}")
+        if not topic.startswith(TRAFFIC_PREFIX):
+            raise RecordingError(f"traffic topic {topic!r} must start with {TRAFFIC_PREFIX}")
         if direction not in ("tx", "rx"):
             raise RecordingError(f"topic {topic}: direction {direction!r} must be 'tx' or 'rx'")
         schemas.check_topic(topic)
@@ -620,10 +621,8 @@ class Recorder:
                 os.fsync(self._file.fileno())
             except (OSError, ValueError):
                 pass
-            try:
+            with contextlib.suppress(OSError, ValueError):
                 self._file.close()
-            except (OSError, ValueError):
-                pass
 
     def _loop(self) -> None:
         q = self._queue
@@ -649,7 +648,7 @@ class Recorder:
                     wake.wait(timeout)
                 wake.clear()
                 item = None
-                try:
+                try:  # not contextlib.suppress: the writer thread's loop, a context manager every pass
                     item = q.get_nowait()
                 except queue.Empty:
                     pass
@@ -734,12 +733,12 @@ class Recorder:
             stats = self._collect_stats()
             end_ns = time.time_ns()
             self._writer.add_metadata(
-                "run_end",
+                MetadataName.RUN_END,
                 {
                     "exit_status": exit_status,
                     "reason": reason,
                     "end_time_ns": str(end_ns),
-                    "end_time_utc": datetime.fromtimestamp(end_ns / 1e9, tz=timezone.utc).isoformat(),
+                    "end_time_utc": datetime.fromtimestamp(end_ns / 1e9, tz=UTC).isoformat(),
                     "messages_written": str(sum(stats.written.values())),
                     "dropped_total": str(stats.dropped_total),
                     "dropped_by_topic": json.dumps(stats.dropped, sort_keys=True),

@@ -82,13 +82,14 @@ def write_recording(path: Path, protocol: str, *, design: int = 4, layers: int =
         # contact search: the last force window before contact_found reads the preload it left
         release = params.contact.threshold_N / 4
         preload = noise.preload_fraction * release
-        if not is_act:
+        if pt is not None:
             h0 = float(pt.static_displacement_m(preload))
         force_samples(t, t + 0.1, lambda ts: np.full(ts.shape, preload))
         t += 0.1
         rec.write_event(t, "contact_found", 0, "zero sag", stage_position_m=1e-3)
 
     if protocol == "static":
+        assert pt is not None  # a leg protocol
         for index, (sag, direction) in enumerate(params.sags_m()):
             t += params.settle_s
             rec.write_event(t, "step", index, f"sag {sag}", voltage_V=0.0, sag_m=float(sag), repetition=0,
@@ -143,7 +144,7 @@ def write_recording(path: Path, protocol: str, *, design: int = 4, layers: int =
         if tracked:
             ts = np.arange(np.ceil(t * CAMERA_RATE_HZ), np.floor(t_end * CAMERA_RATE_HZ) + 1) / CAMERA_RATE_HZ
             vd = drive_at(ts)
-            if is_act:
+            if pt is None:
                 pos = a.free_tip_deflection_m(np.full(ts.shape, v), vd)      # positive toward the sensor
             else:
                 pos = -pt.free_foot_height_m(np.full(ts.shape, v), vd)      # downward travel
@@ -153,7 +154,7 @@ def write_recording(path: Path, protocol: str, *, design: int = 4, layers: int =
                 rec.write_scalar("/camera/displacement", float(ti), displacement_m=float(di), x_px=320.0,
                                  y_px=240.0 + float(di) / 5e-6)
             force_samples(t, t_end, lambda q: np.zeros(q.shape))
-        elif is_act:
+        elif pt is None:
             x0 = preload / a.stiffness_N_per_m
             force_samples(t, t_end, lambda q: np.maximum(a.tip_force_N(np.full(q.shape, v), drive_at(q), -x0), 0.0))
         else:

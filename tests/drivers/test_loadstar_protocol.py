@@ -103,9 +103,8 @@ def test_tare_of_a_saturated_sensor_is_an_overload_fault_and_sends_no_tare():
 
 def test_tare_with_a_wrong_answer_is_a_protocol_error():
     script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"CT0\r", b"0.000\r\n")]
-    with expected_protocol(LoadstarSensor, script) as sensor:
-        with pytest.raises(DeviceProtocolError, match="Tared"):
-            sensor.tare()
+    with expected_protocol(LoadstarSensor, script) as sensor, pytest.raises(DeviceProtocolError, match="Tared"):
+        sensor.tare()
 
 
 def test_reading_beyond_capacity_is_an_overload_fault():

@@ -47,7 +47,7 @@ class NetFtEmulator:
         while not self._stop.is_set():
             try:
                 data, peer = self.sock.recvfrom(64)
-            except socket.timeout:
+            except TimeoutError:
                 if self.streaming_to is not None:
                     for _ in range(5):
                         self.sock.sendto(self.record(), self.streaming_to)

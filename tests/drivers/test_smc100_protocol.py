@@ -114,9 +114,8 @@ def test_home_when_already_ready_sends_nothing_but_ts():
 
 
 def test_home_in_disable_is_refused_without_sending_or():
-    with smc100([(b"1TS\r\n", b"1TS00003C\r\n")]) as stage:
-        with pytest.raises(DeviceFault, match="DISABLE"):
-            stage.home()
+    with smc100([(b"1TS\r\n", b"1TS00003C\r\n")]) as stage, pytest.raises(DeviceFault, match="DISABLE"):
+        stage.home()
 
 
 @pytest.mark.parametrize("ready", ["32", "33", "34", "35"])
@@ -160,16 +159,14 @@ def test_limits_come_from_sl_sr_when_not_configured():
 
 @pytest.mark.parametrize("target_m", [0.0251, -0.03, float("nan"), float("inf")])
 def test_move_outside_limits_raises_before_sending_anything(target_m):
-    with smc100([]) as stage:
-        with pytest.raises(SafetyLimitError, match="outside stage limits"):
-            stage.move_to(target_m)
+    with smc100([]) as stage, pytest.raises(SafetyLimitError, match="outside stage limits"):
+        stage.move_to(target_m)
 
 
 def test_relative_move_checks_where_it_would_end():
     script = [(b"1TP\r\n", b"1TP24\r\n")]
-    with smc100(script) as stage:
-        with pytest.raises(SafetyLimitError):
-            stage.move_by(2e-3)
+    with smc100(script) as stage, pytest.raises(SafetyLimitError):
+        stage.move_by(2e-3)
 
 
 def test_relative_move_sends_pr():
@@ -180,9 +177,8 @@ def test_relative_move_sends_pr():
 
 def test_rejected_move_reports_the_error_letter():
     script = [(b"1PA1\r\n", None), (b"1TE\r\n", b"1TEH\r\n")]
-    with smc100(script) as stage:
-        with pytest.raises(DeviceFault, match="rejected 1PA1: H .*NOT REFERENCED"):
-            stage.move_to(1e-3)
+    with smc100(script) as stage, pytest.raises(DeviceFault, match="rejected 1PA1: H .*NOT REFERENCED"):
+        stage.move_to(1e-3)
 
 
 def test_a_motion_command_is_never_retried_when_te_goes_unanswered():
@@ -204,16 +200,14 @@ def test_motion_timeout_stops_the_stage_then_raises():
 
 def test_following_error_during_a_move_is_a_fault():
     script = [(b"1PA1\r\n", None), OK, (b"1TS\r\n", b"1TS000028\r\n"), (b"1TS\r\n", b"1TS00203D\r\n")]
-    with smc100(script) as stage:
-        with pytest.raises(DeviceFault, match="following error"):
-            stage.move_to(1e-3)
+    with smc100(script) as stage, pytest.raises(DeviceFault, match="following error"):
+        stage.move_to(1e-3)
 
 
 def test_end_of_run_during_a_move_is_a_fault():
     script = [(b"1PA1\r\n", None), OK, (b"1TS\r\n", b"1TS000210\r\n")]
-    with smc100(script) as stage:
-        with pytest.raises(DeviceFault, match="NOT REFERENCED.*positive end of run"):
-            stage.move_to(1e-3)
+    with smc100(script) as stage, pytest.raises(DeviceFault, match="NOT REFERENCED.*positive end of run"):
+        stage.move_to(1e-3)
 
 
 def test_stop_addresses_only_this_controller_and_reads_te():
@@ -268,9 +262,8 @@ def test_enable_and_disable_send_mm_and_check_te():
 
 
 def test_enable_rejected_in_not_referenced():
-    with smc100([(b"1MM1\r\n", None), (b"1TE\r\n", b"1TEH\r\n")]) as stage:
-        with pytest.raises(DeviceFault, match="H"):
-            stage.enable()
+    with smc100([(b"1MM1\r\n", None), (b"1TE\r\n", b"1TEH\r\n")]) as stage, pytest.raises(DeviceFault, match="H"):
+        stage.enable()
 
 
 def test_velocity_and_acceleration_read_and_set_in_mm():
@@ -331,15 +324,13 @@ def test_error_letter_read_back():
     ],
 )
 def test_bad_replies_are_protocol_errors(reply, message):
-    with smc100([(b"1TP\r\n", reply)]) as stage:
-        with pytest.raises(DeviceProtocolError, match=message):
-            stage.position_m()
+    with smc100([(b"1TP\r\n", reply)]) as stage, pytest.raises(DeviceProtocolError, match=message):
+        stage.position_m()
 
 
 def test_ts_with_unknown_state_is_a_protocol_error():
-    with smc100([(b"1TS\r\n", b"1TS000099\r\n")]) as stage:
-        with pytest.raises(DeviceProtocolError, match="TS"):
-            stage.status()
+    with smc100([(b"1TS\r\n", b"1TS000099\r\n")]) as stage, pytest.raises(DeviceProtocolError, match="TS"):
+        stage.status()
 
 
 def test_silence_is_a_timeout_within_the_driver_timeout():

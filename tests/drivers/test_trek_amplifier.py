@@ -10,11 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drivers.daq import AiBlock, DaqBackend
 from drivers.trek_amplifier import TrekAmplifier
 from hamr_bench.clock import VirtualClock
 from hamr_bench.errors import ConfigError, DeviceFault, DeviceTimeout, SafetyLimitError
-from hamr_bench.interfaces import Amplifier
+from hamr_bench.interfaces import AiBlock, Amplifier, DaqBackend
 from sim_devices.daq_sim import SimAmplifierSpec, SimDaq
 
 GAIN = 35.0
@@ -82,7 +81,7 @@ class RecordingDaq:
             stop = math.inf if stop is None else stop
             k = np.arange(len(samples))
             keep = t0 + k / rate <= stop + 1e-12
-            events += list(zip((t0 + k[keep] / rate).tolist(), samples[keep].tolist()))
+            events += list(zip((t0 + k[keep] / rate).tolist(), samples[keep].tolist(), strict=True))
         # stable sort on time: at equal times the later write wins, which is the order they were recorded in
         return sorted(events, key=lambda e: e[0])
 

@@ -1,10 +1,12 @@
 """The backend registry (found by name, one clear line when missing), the one configuration loader (types, checks,
 unknown and missing keys, one-line errors naming the place), one default per setting, and the command line's
-refusal to lose a command silently."""
+refusal to lose a command silently (commands and backends found by name through entry points)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import importlib.metadata
 import inspect
 import subprocess
 import sys
@@ -12,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from hamr_bench import backends, cli
+from hamr_bench import backends, cli, entry_points
 from hamr_bench.config import Place, load_table, setting
 from hamr_bench.errors import ConfigError
 from hamr_bench.rig import load_rig, sim_rig_path
@@ -130,11 +132,46 @@ def test_a_bad_key_in_a_table_the_run_does_not_use_is_still_an_error(tmp_path):
 
 
 def test_a_command_module_that_fails_to_import_is_one_line_and_a_failure(monkeypatch, capsys):
-    monkeypatch.setattr(cli, "COMMAND_MODULES", [*cli.COMMAND_MODULES, "no_such_command"])
+    declared = {**cli.declared_commands(), "nothing": "hamr_bench.commands.no_such_command:register"}
+    monkeypatch.setattr(cli, "declared_commands", lambda: declared)
     code = cli.main(["--help"])
     err = capsys.readouterr().err.strip()
     assert code == cli.EXIT_ERROR and len(err.splitlines()) == 1
-    assert "hamr_bench.commands.no_such_command cannot be loaded: ModuleNotFoundError" in err
+    assert "command 'nothing' (hamr_bench.commands.no_such_command:register) cannot be loaded: ModuleNotFoundError" \
+        in err
+
+
+def test_the_command_line_lists_the_declared_commands_in_declaration_order(capsys):
+    import tomllib
+
+    declared = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["entry-points"][cli.COMMAND_GROUP]
+    assert list(cli.declared_commands())[:len(declared)] == list(declared)
+    parser = cli.build_parser()
+    (subparsers,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    listed = [choice.dest for choice in subparsers._choices_actions]
+    # each module registers one command; its name is the entry point's (`import` lives in import_cmd.py)
+    assert listed[:len(declared)] == list(declared)
+
+
+def test_the_source_trees_declarations_replace_a_stale_installed_copy(monkeypatch):
+    # An editable install records the entry points of the day it was installed; a checkout that has since moved a
+    # module must not see the old name (it would fail to import), while other distributions' plug-ins stay.
+    class Dist:
+        def __init__(self, name):
+            self.name = name
+
+    def fake_installed(group):
+        stale = importlib.metadata.EntryPoint("fit", "hamr_bench.commands.fit:register", group)
+        plugin = importlib.metadata.EntryPoint("lab-extra", "lab_plugin.cmd:register", group)
+        return [stale._for(Dist("hamr_bench")), plugin._for(Dist("lab-plugin"))]
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: fake_installed(group))
+    monkeypatch.setattr(entry_points, "_source_tree", lambda group: {"fit": "analysis.commands.fit:register"})
+    assert entry_points.declared(cli.COMMAND_GROUP) == {"fit": "analysis.commands.fit:register",
+                                                         "lab-extra": "lab_plugin.cmd:register"}
+    monkeypatch.setattr(entry_points, "_source_tree", lambda group: None)  # an installed wheel: metadata only
+    assert entry_points.declared(cli.COMMAND_GROUP) == {"fit": "hamr_bench.commands.fit:register",
+                                                         "lab-extra": "lab_plugin.cmd:register"}
 
 
 def test_importing_the_selfcheck_loads_no_simulated_device():
@@ -142,3 +179,11 @@ def test_importing_the_selfcheck_loads_no_simulated_device():
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('sim_devices', 'drivers')))")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_the_demo_finds_every_command_it_runs_wherever_its_module_lives():
+    # the demo skips a step whose command is missing; a command module that moved packages must not look missing
+    from hamr_bench.commands import demo
+
+    assert all(demo._available(c) for c in ("paper", "fit", "report", "replay", "compare", "gap"))
+    assert not demo._available("no-such-command")

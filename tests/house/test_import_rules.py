@@ -2,7 +2,7 @@
 functions) and every `importlib.import_module("...")` / `__import__("...")` with a literal name:
 
 - `hamr_bench` imports none of `drivers`, `sim_devices`, `analysis` (backends are found by name through
-  `hamr_bench.backends`); the command layer is the one exception until it moves above them (`COMMAND_EXCEPTIONS`);
+  `hamr_bench.backends`, command modules through the entry-point group `hamr_bench.commands`);
 - `analysis` never imports `drivers`;
 - `sim_devices` never imports `drivers` (the emulators implement what the drivers expect; a driver test against an
   emulator is then a test of the real code path).
@@ -19,18 +19,6 @@ FORBIDDEN: dict[str, frozenset[str]] = {
     "analysis": frozenset({"drivers"}),
     "sim_devices": frozenset({"drivers"}),
 }
-# (file, package it imports): the commands still live inside hamr_bench and reach up into the packages above it.
-# Phase 2 of the house issue moves the commands into a top layer and deletes this list (and the line using it).
-COMMAND_EXCEPTIONS: frozenset[tuple[str, str]] = frozenset({
-    ("hamr_bench/commands/compare.py", "analysis"),
-    ("hamr_bench/commands/fit.py", "analysis"),
-    ("hamr_bench/commands/gap.py", "analysis"),
-    ("hamr_bench/commands/import_cmd.py", "analysis"),
-    ("hamr_bench/commands/replay.py", "analysis"),
-    ("hamr_bench/commands/report.py", "analysis"),
-    ("hamr_bench/commands/selfcheck.py", "analysis"),
-    ("hamr_bench/commands/sim.py", "sim_devices"),
-})
 
 
 def imported_modules(tree: ast.AST) -> list[tuple[int, str]]:
@@ -53,31 +41,20 @@ def _is_import_call(func: ast.expr) -> bool:
     return isinstance(func, ast.Name) and func.id in ("__import__", "import_module")
 
 
-def violations() -> tuple[list[str], set[tuple[str, str]]]:
-    found, excepted = [], set()
+def violations() -> list[str]:
+    found = []
     for package, forbidden in FORBIDDEN.items():
         for path in sorted((REPO / package).rglob("*.py")):
             rel = path.relative_to(REPO).as_posix()
             for line, module in imported_modules(ast.parse(path.read_text(encoding="utf-8"), rel)):
-                top = module.split(".")[0]
-                if top not in forbidden:
-                    continue
-                if (rel, top) in COMMAND_EXCEPTIONS:
-                    excepted.add((rel, top))
-                else:
+                if module.split(".")[0] in forbidden:
                     found.append(f"{rel}:{line}: {package} must not import {module}")
-    return found, excepted
+    return found
 
 
 def test_dependencies_point_one_way():
-    found, _ = violations()
+    found = violations()
     assert not found, "\n".join(found)
-
-
-def test_every_listed_exception_is_still_needed():
-    _, excepted = violations()
-    stale = sorted(COMMAND_EXCEPTIONS - excepted)
-    assert not stale, f"no longer imported, delete from COMMAND_EXCEPTIONS: {stale}"
 
 
 def test_the_check_sees_function_level_and_by_name_imports():

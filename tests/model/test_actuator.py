@@ -16,7 +16,8 @@ def _gf_by_integration(wr: float, lr: float) -> float:
     F = m int_0^l (L' - x) dx / int_0^l (L' - x)^2 / w(x) dx   (l = 1, w_nom = 1, L' = 1 + lr).
     """
     Lp = 1.0 + lr
-    w = lambda x: wr + (2.0 - 2.0 * wr) * x  # base wr, tip 2 - wr, mean 1
+    def w(x):
+        return wr + (2.0 - 2.0 * wr) * x  # base wr, tip 2 - wr, mean 1
     num = quad(lambda x: Lp - x, 0, 1)[0]
     den = quad(lambda x: (Lp - x) ** 2 / w(x), 0, 1)[0]
     return (num / den) / 1.5

@@ -44,7 +44,8 @@ def test_R_tra_and_dphi_ddelta_by_finite_difference_in_delta(design):
             t = t - (tr.delta_tra_m(g, c, t) - delta) / slope
         return t
     tp, tm = theta_at(d0 + eps, th), theta_at(d0 - eps, th)
-    leg = lambda t: -tr.foot_height_fab_m(g, t)
+    def leg(t):
+        return -tr.foot_height_fab_m(g, t)
     R_fd = (leg(tp) - leg(tm)) / (2 * eps)
     assert np.allclose(tr.transmission_ratio(g, c, th), R_fd, rtol=1e-4)
     dphi_fd = (tr.joint_angles_rad(g, c, tp) - tr.joint_angles_rad(g, c, tm)) / (2 * eps)

@@ -29,7 +29,7 @@ def _facts(reader: RecordingReader) -> dict:
     }
     status = dict(vars(reader.status))
     out["status"] = status
-    for topic, info in topics.items():
+    for topic, _info in topics.items():
         out[f"log_times {topic}"] = reader.log_times_s(topic).tolist()
         for name, call in (("scalars", reader.scalars), ("traffic", reader.traffic), ("images", reader.images)):
             try:

@@ -183,10 +183,9 @@ def test_missing_directory_is_a_one_line_error(tmp_path):
 
 def test_context_manager_closes_failed_with_the_exception_text(tmp_path):
     path = tmp_path / "boom.mcap"
-    with pytest.raises(ValueError):
-        with Recorder(path) as rec:
-            rec.write_scalar("/force", 0.0, force_N=1.0)
-            raise ValueError("stage fault: E7\nsecond line")
+    with pytest.raises(ValueError), Recorder(path) as rec:
+        rec.write_scalar("/force", 0.0, force_N=1.0)
+        raise ValueError("stage fault: E7\nsecond line")
     r = RecordingReader(path)
     assert r.exit_status == "failed" and r.exit_reason == "ValueError: stage fault: E7"
     assert r.scalars("/force")["force_N"].tolist() == [1.0]
@@ -194,9 +193,8 @@ def test_context_manager_closes_failed_with_the_exception_text(tmp_path):
 
 def test_context_manager_ctrl_c_is_aborted_and_close_is_idempotent(tmp_path):
     path = tmp_path / "ctrlc.mcap"
-    with pytest.raises(KeyboardInterrupt):
-        with Recorder(path) as rec:
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), Recorder(path) as rec:
+        raise KeyboardInterrupt
     assert RecordingReader(path).exit_status == "aborted"
     assert rec.close("success") == rec.stats()  # already closed: no second run_end
     assert RecordingReader(path).exit_status == "aborted"

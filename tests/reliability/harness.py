@@ -180,14 +180,11 @@ def fault_moments(protocol: str, tmp_factory: Any) -> dict[str, float]:
     out = tmp_factory.mktemp("moments") / f"{protocol}.mcap"
     run_cli(protocol, out)
     events = RecordingReader(out).events()
-    first = {}
+    first: dict[str, float] = {}
     for event in events:
         first.setdefault(event.kind, event.time_s)
     steps = [e.time_s for e in events if e.kind == "step"]
-    if "contact_found" in first:
-        search = (first["tare"] + first["contact_found"]) / 2
-    else:
-        search = first["home"] + 0.1
+    search = (first["tare"] + first["contact_found"]) / 2 if "contact_found" in first else first["home"] + 0.1
     drive = (steps[1] if protocol == "static" else first["drive_start"]) + 0.3
     _MOMENTS[protocol] = {"search": round(search, 3), "drive": round(drive, 3)}
     return _MOMENTS[protocol]
@@ -263,6 +260,8 @@ class FaultOutcome:
     @property
     def time_to_safe_s(self) -> float:
         """From the fault to the moment both DAQ outputs sit at 0 V and the stage has stopped (rig clock)."""
+        if self.safe is None:
+            raise ValueError("no safe-state measure: the fault is not modelled")
         done = max(max(self.safe.zero_V_at_s.values()), self.safe.stage_still_at_s)
         return max(done - self.first_use_s, 0.0)
 
@@ -350,16 +349,22 @@ def daq_output_staircase(daq: Any, channel: str) -> tuple[np.ndarray, np.ndarray
 # ---------------------------------------------------------------------------------------------------- SIGKILL
 def topic_payloads(path: Path) -> dict[str, list[bytes]]:
     """Every message of a finished recording, per topic, in file order, as what identifies the sample: the payload
-    bytes (camera frames: the encoded image only, since their timestamp carries the run's start epoch)."""
+    bytes (camera frames: the encoded image only, and log lines without their timestamp, since those timestamps
+    carry the run's start epoch)."""
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from foxglove_schemas_protobuf.Log_pb2 import Log
     from mcap.reader import make_reader
 
     out: dict[str, list[bytes]] = {}
     with open(path, "rb") as f:
-        for _schema, channel, message in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False):
+        for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False):
             data = message.data
             if channel.topic == "/camera/image":
                 data = CompressedImage.FromString(data).data
+            elif schema is not None and schema.name == "foxglove.Log":
+                line = Log.FromString(data)
+                line.ClearField("timestamp")
+                data = line.SerializeToString()
             out.setdefault(channel.topic, []).append(data)
     return out
 
@@ -507,7 +512,7 @@ def takes_the_daq(protocol: str, fault: str) -> bool:
     return protocol == "actuator" and name in ("force_sensor:disconnect", "force_sensor:no_reply")
 
 
-def loss_allowed(protocol: str, fault: str, outcome: "FaultOutcome") -> bool:
+def loss_allowed(protocol: str, fault: str, outcome: FaultOutcome) -> bool:
     """Samples missing from before the fault are allowed only where they never reached the computer: within
     IN_TRANSIT_S of the fault (an exchange straddling it), or - when the port of the force sensor (or the DAQ it is
     read through) goes away - the lines still unread in it, up to LINK_LOSS_BOUND_S. Commands are never lost: the

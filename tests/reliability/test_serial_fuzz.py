@@ -29,7 +29,7 @@ class NoisePort:
         self.is_open = True
         self.rx = bytearray()
 
-    def open_for(self, url: str, **settings) -> "NoisePort":  # noqa: ANN003 - pyserial's keyword settings
+    def open_for(self, url: str, **settings) -> NoisePort:  # noqa: ANN003 - pyserial's keyword settings
         self.timeout = settings.get("timeout")
         return self
 

@@ -13,7 +13,6 @@ from analysis.replay import read_replay_source, replay_recording
 from hamr_bench.recording import RecordingReader
 from tests.reliability.harness import IN_TRANSIT_S
 from tests.replay.conftest import SOURCE_EFFECTS, record
-from tests.replay.test_twin import assert_same_data
 
 
 def test_aborted_recording_replays_what_it_holds(tmp_path):

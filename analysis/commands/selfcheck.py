@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError(f"--trials: expected at least 1, got {args.trials}")
-    if not (0 <= args.null_fraction and 0 <= args.decoy_fraction and args.null_fraction + args.decoy_fraction <= 1):
+    if not (args.null_fraction >= 0 and args.decoy_fraction >= 0 and args.null_fraction + args.decoy_fraction <= 1):
         raise ConfigError("--null-fraction and --decoy-fraction: expected shares in [0, 1] summing to at most 1")
     from analysis.gap.selfcheck import selfcheck
 

@@ -8,7 +8,16 @@ import argparse
 import signal
 import sys
 
+import numpy as np
+
+from hamr_bench.clock import RealClock
 from hamr_bench.errors import ConfigError
+from sim_devices.faults import parse_fault_spec
+from sim_devices.loadstar_emulator import LoadstarEmulator, LoadstarParams
+from sim_devices.pty_server import PtyServer
+from sim_devices.serial_link import LineEndpoint
+from sim_devices.smc100_emulator import Smc100Emulator, Smc100Params
+from sim_devices.smc100_protocol import Smc100Protocol
 
 # Effects each emulator models when served on its own: name -> meaning and unit of the strength.
 SERVE_EFFECTS: dict[str, dict[str, str]] = {
@@ -76,19 +85,12 @@ def parse_effects(text: str, device: str) -> dict[str, float]:
     return effects
 
 
-def build_endpoint(args: argparse.Namespace):  # -> LineEndpoint (import kept lazy)
-    import numpy as np
-
-    from hamr_bench.clock import RealClock
-    from sim_devices.faults import parse_fault_spec
-
+def build_endpoint(args: argparse.Namespace) -> LineEndpoint:
     clock = RealClock()
     effects = parse_effects(args.effects, args.device)
     rng = np.random.default_rng(args.seed)
+    endpoint: LineEndpoint
     if args.device == "smc100":
-        from sim_devices.smc100_emulator import Smc100Emulator, Smc100Params
-        from sim_devices.smc100_protocol import Smc100Protocol
-
         if not 1 <= args.address <= 31:
             raise ConfigError(f"--address {args.address}: SMC100 addresses are 1..31")
         emulator = Smc100Emulator(
@@ -96,8 +98,6 @@ def build_endpoint(args: argparse.Namespace):  # -> LineEndpoint (import kept la
         )
         endpoint = Smc100Protocol(emulator, rng=rng)
     else:
-        from sim_devices.loadstar_emulator import LoadstarEmulator, LoadstarParams
-
         drift = effects.get("sensor_drift", 0.0)
         params = LoadstarParams(
             command_set=args.command_set,
@@ -114,8 +114,6 @@ def build_endpoint(args: argparse.Namespace):  # -> LineEndpoint (import kept la
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    from sim_devices.pty_server import PtyServer
-
     endpoint = build_endpoint(args)
     server = PtyServer(endpoint)
     print(server.path, flush=True)

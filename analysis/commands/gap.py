@@ -36,7 +36,7 @@ def load_params(path: Path | None) -> dict | None:
         raise ConfigError(f"--params {path}: cannot read ({exc.strerror})") from None
     try:
         data = json.loads(text)
-    except ValueError as exc:
+    except json.JSONDecodeError as exc:
         raise ConfigError(f"--params {path}: not JSON (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(data, dict) or not ({"actuators", "designs"} & set(data)):
         raise ConfigError(f"--params {path}: expected the object `hamr-bench fit --json` prints "
