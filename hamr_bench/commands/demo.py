@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     if _available("gap"):
         if step("7. Where the model and the 'real' bench part, and why",
                 ["gap", *recordings, "--report", str(out / "gap")]):
-            looks.append(f"{out / 'gap'}/  residual map, the effect named, and how far it closes the gap")
+            looks.append(f"{out / 'gap'}/  residual map, the effects named (if any), and how far they close the gap")
     else:
         print("\n== 7. gap diagnosis: not built yet")
 
