@@ -4,7 +4,7 @@ effect_shapes = { NAME = { PARAM = VALUE } }`). Strength 0 (or absent) gives bac
 exactly: its stage is skipped.
 
 These are the GENERATOR forms. The gap diagnosis (`analysis`) fits its own candidate families, and the two share
-no formula (coordinator's partition, /work/coord/notes/forms.md; docs/gap.md lists the pairs). Where each lands:
+no formula (docs/gap.md lists the pairs side by side). Where each lands:
 
 - drive chain (sim_devices.drive_chain): `hysteresis` (Preisach, sim_devices.preisach), `creep` (Kelvin-Voigt /
   Prony chain), `field_dependent_d31` (monotone knots or logistic in field), `amplifier_gain_error` (decoy);

@@ -1,5 +1,6 @@
 """The gap diagnosis, stage by stage: fit the nominal model with each specimen's gains under the tolerance prior
-and every nuisance (fit before you diagnose), map where the rest of the gap lies (`residuals`), screen each
+and every nuisance (fit before you diagnose), test the rows' lack of fit and the specimens as a population against
+their tolerances, map where the rest of the gap lies (`residuals`), screen each
 candidate family alone (`screening`), name effects by forward selection on held-out conditions (`ranking`), and
 decide what each named effect means (`verdict`)."""
 
@@ -8,8 +9,10 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from analysis.gap import residuals as res
 from analysis.gap.families import CANDIDATES, FAMILIES
@@ -45,12 +48,24 @@ def nominal_fit(p: Problem) -> Fit:
     return p.solve((), p.initial_nuisances(), max_nfev=100)
 
 
+def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
+    """Are the specimens, as a population, where the tolerances put them? chi^2 of their fitted gains under the
+    tolerance prior (2 per specimen group). In-sample a shift common to every specimen is absorbed by the gains
+    and leaves no lack of fit in the rows: it shows here, as specimens all beyond their tolerances."""
+    chi2 = 0.0
+    for g in p.groups:
+        w = p.gain_whitening[g] @ np.array([fit.value("gain", g, 0), fit.value("gain", g, 1)])
+        chi2 += float(w @ w)
+    dof = 2 * len(p.groups)
+    return {"chi2": chi2, "dof": dof, "p_value": float(stats.chi2.sf(chi2, dof)) if dof else 1.0}
+
+
 def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
     """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), and its prior score."""
     out = {}
     for g in p.groups:
         a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
-        score = float(np.linalg.norm(p._whiten[g] @ np.array([a, b])))
+        score = float(np.linalg.norm(p.gain_whitening[g] @ np.array([a, b])))
         out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
     return out
 
@@ -62,7 +77,8 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     names = applicable(p, list(candidates or CANDIDATES))
     nominal = nominal_fit(p)
     lack = res.global_test(p, nominal.z, len(nominal.layout.params))
-    gap = lack["p_value"] < GAP_ALPHA
+    population = population_test(p, nominal)
+    gap = lack["p_value"] < GAP_ALPHA or population["p_value"] < GAP_ALPHA
     where = [g.to_json() for g in res.regions(p, nominal.z)]
     screened, _ = screen(p, nominal, names) if gap else ([], {})
     judge = Judge(p, seed)
@@ -79,6 +95,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                      specimens=specimen_table(p, nominal), screening=screened, waterfall=sel.steps, named=named,
                      best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
-                     recordings=data.provenance() if hasattr(data, "provenance") else [])
+                     recordings=data.provenance() if hasattr(data, "provenance") else [],
+                     specimen_population=population)
     diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
     return diag

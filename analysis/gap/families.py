@@ -1,6 +1,6 @@
 """The candidate effects as FAMILIES: each fits its physical effect in a range of forms (shape parameters, fitted)
 with ONE strength in a physical unit. The forms are deliberately not the simulated bench's (docs/gap.md lists the
-pairs side by side; /work/coord/notes/forms.md is the partition):
+pairs side by side):
 
 | candidate | family (shape parameters) | strength |
 |---|---|---|

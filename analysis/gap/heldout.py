@@ -1,10 +1,20 @@
-"""Held-out judgement: folds of whole conditions (replicates and a condition's specimens' phases stay together),
-each fold predicted by the model refitted without it, and bootstrap intervals over conditions.
+"""Held-out judgement: the prediction of data the fit did not see, two ways, and bootstrap intervals over
+conditions.
 
-The refit without a fold is one Gauss-Newton step from the full-data optimum on the training rows (and every prior
-row), with the full fit's Jacobian: the standard linearised cross-validation, exact for a model linear in its
-parameters near the optimum and far cheaper than a nonlinear refit per fold. A specimen or session whose rows are
-all held out is then predicted from its prior (the population), as an unseen specimen would be."""
+- Condition folds: whole conditions (replicates and a condition's specimens' phases stay together) left out, each
+  predicted by the model refitted without it: does the model carry to a new drive condition?
+- Specimen folds (where the data hold two or more specimen groups): each specimen left out and predicted from the
+  population, its gains at the prior's centre, in units of the predictive spread (noise and the tolerance prior's
+  spread of its gains): does the model carry to a new specimen? This is where a fabrication shift common to every
+  specimen shows: in-sample each specimen's gains absorb it, but a new specimen is predicted as far off as the
+  shift, while specimen scatter alone is predicted to within the tolerance spread (z ~ 1).
+
+The held-out z of a model is both vectors together; under the right model its RMS is ~1 (the noise floor).
+
+The refit without a fold is one Gauss-Newton step from the full-data optimum on the training rows (and the other
+prior rows), with the full fit's Jacobian: the standard linearised cross-validation, exact for a model linear in
+its parameters near the optimum and far cheaper than a nonlinear refit per fold. A left-out specimen's gains are
+set to the prior's centre exactly (the model re-evaluated there), not by a linear step."""
 
 from __future__ import annotations
 
@@ -15,6 +25,7 @@ from analysis.gap.results import HeldOut
 
 N_FOLDS = 5
 N_BOOT = 400
+NAN_Z = 1e3       # a row the model cannot evaluate (as `problem.NAN_RESIDUAL`)
 
 
 def condition_ids(p: Problem) -> np.ndarray:
@@ -43,6 +54,45 @@ def strata(p: Problem) -> np.ndarray:
     keys = [(p.data.runs[r.run].fixture, r.mode, r.quantity) for r in p.rows]
     uniq = sorted(set(keys))
     return np.array([uniq.index(k) for k in keys])
+
+
+def specimen_folds(p: Problem) -> list[str]:
+    """The specimen groups that can each be left out (none when the data hold a single group: nothing would
+    remain to predict it from)."""
+    return list(p.groups) if len(p.groups) >= 2 else []
+
+
+def specimen_z(p: Problem, fit: Fit, groups: list[str]) -> np.ndarray:
+    """Per row, its z when its specimen was left out and predicted from the population: its gains at 0, the
+    rest refitted by one linearised step without its rows and prior rows, in units of the predictive spread
+    sqrt(1 + j Sigma j^T) (j: the row's sensitivity to its specimen's gains, Sigma: their tolerance prior)."""
+    n = fit.layout.n_rows
+    lay = fit.layout
+    out = np.zeros(n)
+    prior_rows = p.prior_rows(lay)
+    for g in groups:
+        rows = np.zeros(n, bool)
+        for k, e in enumerate(p.engines):
+            if p.group_of(e) == g:
+                rows[p.slices[k]] = True
+        cols = [lay.index[("gain", g, 0)], lay.index[("gain", g, 1)]]
+        keep_cols = np.ones(len(lay.params), bool)
+        keep_cols[cols] = False
+        train = np.r_[~rows, np.ones(fit.residual.size - n, bool)]
+        for c in cols:
+            for j in prior_rows.get(c, []):
+                train[n + j] = False
+        jt = fit.jac[np.ix_(train, keep_cols)]
+        step, *_ = np.linalg.lstsq(jt, -fit.residual[train], rcond=1e-10)
+        x0 = fit.x.copy()
+        x0[cols] = 0.0
+        z_pop = (p.y - p.model(lay, x0)) / p.sigma
+        z_pop = np.where(np.isfinite(z_pop), z_pop, NAN_Z)
+        jg = fit.jac[:n][rows][:, cols]
+        cov = np.linalg.inv(p.gain_whitening[g].T @ p.gain_whitening[g])
+        spread = np.sqrt(1.0 + np.einsum("ij,jk,ik->i", jg, cov, jg))
+        out[rows] = (z_pop[rows] + fit.jac[:n][np.ix_(rows, keep_cols)] @ step) / spread
+    return out
 
 
 def heldout_z(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -81,12 +131,20 @@ class Judge:
     def __init__(self, p: Problem, seed: int = 0) -> None:
         self.p = p
         self.folds = folds(p)
+        self.specimens = specimen_folds(p)
         cid, sid = condition_ids(p), strata(p)
-        self.resamples = _boot_rows(cid, sid, np.random.default_rng(seed), N_BOOT)
+        rows = _boot_rows(cid, sid, np.random.default_rng(seed), N_BOOT)
+        n = p.y.size
+        # a resample of rows takes both of a row's held-out z (condition and specimen) together
+        self.resamples = [np.r_[r, r + n] for r in rows] if self.specimens else rows
 
     def z(self, fit: Fit) -> np.ndarray:
+        """Held-out z per row: the condition folds', then (with two or more specimens) the specimen folds'."""
         if "heldout_z" not in fit.extra:
-            fit.extra["heldout_z"], fit.extra["fold_steps"] = heldout_z(fit, self.folds)
+            z, fit.extra["fold_steps"] = heldout_z(fit, self.folds)
+            if self.specimens:
+                z = np.r_[z, specimen_z(self.p, fit, self.specimens)]
+            fit.extra["heldout_z"] = z
         return fit.extra["heldout_z"]
 
     def heldout(self, fit: Fit) -> HeldOut:

@@ -119,7 +119,9 @@ class Problem:
         self.groups = sorted({self.group_of(e) for e in self.engines})
         self.sessions = sorted({self.session_of(e) for e in self.engines if e.has_contact()})
         self.chains = sorted({self.chain_of(e, q) for e in self.engines for q in self._quantities(e)})
-        self._whiten = {g: tol.whitening(next(e.actuator for e in self.engines if self.group_of(e) == g))
+        # per specimen group: maps its two log gains (stroke, stiffness) to independent unit-variance scores
+        # under the tolerance prior
+        self.gain_whitening = {g: tol.whitening(next(e.actuator for e in self.engines if self.group_of(e) == g))
                         for g in self.groups}
         self._cache: list[dict] = [{} for _ in self.engines]
         self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
@@ -221,7 +223,7 @@ class Problem:
     def _sparsity(self, lay: Layout) -> object:
         n_res = lay.n_rows + lay.n_prior
         s = lil_matrix((n_res, len(lay.params)), dtype=int)
-        prior_of = self._prior_rows(lay)
+        prior_of = self.prior_rows(lay)
         everything = np.ones(self.y.size, bool)
         force_rows = np.array([r.quantity == "force_N" for r in self.rows])
         for i, p in enumerate(lay.params):
@@ -242,7 +244,7 @@ class Problem:
                 s[lay.n_rows + j, i] = 1
         return s.tocsr()
 
-    def _prior_rows(self, lay: Layout) -> dict[int, list[int]]:
+    def prior_rows(self, lay: Layout) -> dict[int, list[int]]:
         """Parameter index -> the prior rows it enters (offsets after the data rows), in `_prior` order."""
         out: dict[int, list[int]] = {}
         j = 0
@@ -346,7 +348,7 @@ class Problem:
         out = []
         for g in self.groups:
             ab = np.array([x[lay.index[("gain", g, 0)]], x[lay.index[("gain", g, 1)]]])
-            out.extend(self._whiten[g] @ ab)
+            out.extend(self.gain_whitening[g] @ ab)
         for p, v in zip(lay.params, x, strict=True):
             if p.kind == "shape":
                 out.append((v - FAMILIES[p.key[0]].shapes[p.key[1]].default) / p.scale)

@@ -1,5 +1,5 @@
 """Typed results of the diagnosis's stages (screen -> fit -> held-out -> rank -> verdict) and their JSON form
-(the shape `hamr-bench gap --json` prints; /work/coord/notes/gap.md and docs/gap.md describe it)."""
+(the shape `hamr-bench gap --json` prints; docs/gap.md describes it)."""
 
 from __future__ import annotations
 
@@ -118,6 +118,7 @@ class Diagnosis:
     ramp_rates_s: list[float]
     elapsed_s: float
     recordings: list[dict[str, Any]] = field(default_factory=list)
+    specimen_population: dict[str, Any] = field(default_factory=dict)
     fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
 
     def ranking(self) -> list[dict[str, Any]]:
@@ -139,7 +140,9 @@ class Diagnosis:
                 "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained,
                 "cannot_separate": self.cannot_separate, "where": self.where,
                 "gap_above_noise": self.gap_above_noise, "nominal_lack_of_fit": self.nominal_lack_of_fit,
+                "specimen_population": self.specimen_population,
                 "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
-                "heldout_units": "noise units (z = residual / pure-error standard error); 1 = the noise floor",
+                "heldout_units": "noise units (z = residual / pure-error standard error; for a specimen left "
+                                 "out, / its predictive spread); 1 = the noise floor",
                 "recordings": self.recordings, "elapsed_s": self.elapsed_s}

@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 # The one mapping table: the generator's effect -> the diagnosis candidate names that mean the same physical
 # effect. Main's names (analysis/gap/library.py CANDIDATES) and the names the issue-16 diagnosis adds
-# (/work/coord/notes/gap.md: grounding_lengthening, pzt_thickness, pzt_modulus). A longer active length and a
+# (grounding_lengthening, pzt_thickness, pzt_modulus). A longer active length and a
 # compliant clamp are one observable, an effective length (the paper: "effective length to be greater due to
 # imperfect mechanical grounding"), so both map to it. A name counts as "in the library" for a case when it
 # appears in that case's ranking.

@@ -117,8 +117,6 @@ def test_gap_finds_creep_the_lab_put_in(creep_lab, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the diagnosis does not yet model specimen scatter (issue 15 item 2, the gap "
-                                       "helper's side): 5-6 % d31 scatter between specimens hides the creep")
 def test_gap_finds_creep_across_scattered_specimens(tmp_path, capsys):
     write_session(tmp_path, Effects(creep=0.05), seed=13)
     assert run_json(capsys, ["gap", str(tmp_path), "--json", "--jobs", "1"])["best"] == "creep"
