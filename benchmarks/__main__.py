@@ -74,7 +74,7 @@ class Context:
             out = self.root / "campaign"
             out.mkdir()
             # every named parameter given, so the subset's keys (designs, layers) can only be the subset's
-            self.campaign_result = bench_campaign.run(jobs=None, set_options=None, out_dir=out,
+            self.campaign_result = bench_campaign.run(jobs=None, set_options=None, out_dir=out, effects=None,
                                                       **self.campaign_subset())
             self.campaign_dir = out
         return self.campaign_dir

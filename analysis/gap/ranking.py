@@ -91,18 +91,17 @@ def _tie(c: StepCandidate, lead: StepCandidate, tried: dict[str, Fit], judge: Ju
     return bool(close_heldout and in_sample < stats.chi2.ppf(0.99, 1))
 
 
-def strength_interval(p: Problem, fit: Fit, name: str, judge: Judge) -> tuple[float, float]:
-    """95 % interval of a strength from the joint fit: the Wald half-width from the Jacobian (noise, scaled by the
-    over-dispersion) and the delete-a-fold jackknife of the held-out steps (model form across conditions), the
+def strength_estimate(p: Problem, fit: Fit, name: str, judge: Judge) -> tuple[float, tuple[float, float]]:
+    """A strength and its 95 % interval from the joint fit: the Wald half-width from the Jacobian (noise, scaled by
+    the over-dispersion) and the delete-a-fold jackknife of the held-out steps (model form across conditions), the
     jackknife's excess over the noise added in quadrature; clipped to the family's range. The drift's wander is
-    derived from its baseline coefficients: its interval is its Wald interval by the delta method."""
+    derived from its baseline coefficients (`_drift_estimate`)."""
     f = FAMILIES[name]
     scale2 = overdispersion(p, fit)
     jtj = fit.jac.T @ fit.jac
     cov = np.linalg.pinv(jtj) * scale2
     if f.kind == "baseline":
-        s = fit.drift_strength
-        return _drift_interval(p, fit, cov, s)
+        return _drift_estimate(p, fit, cov, fit.drift_strength)
     i = fit.layout.index[("strength", name)]
     s = float(fit.x[i])
     wald = 1.96 * float(np.sqrt(max(cov[i, i], 0.0)))
@@ -115,13 +114,19 @@ def strength_interval(p: Problem, fit: Fit, name: str, judge: Judge) -> tuple[fl
         jack = float(stats.t.ppf(0.975, k - 1)) * se
     half = float(np.sqrt(wald ** 2 + max(0.0, jack ** 2 - wald ** 2)))
     lo, hi = f.bounds
-    return max(lo, s - half), min(hi, s + half)
+    return s, (max(lo, s - half), min(hi, s + half))
 
 
-def _drift_interval(p: Problem, fit: Fit, cov: np.ndarray, s: float) -> tuple[float, float]:
+def _drift_estimate(p: Problem, fit: Fit, cov: np.ndarray, s: float) -> tuple[float, tuple[float, float]]:
+    """The wander rate, bias-corrected, and its basic (pivot) interval from draws of the baseline coefficients.
+
+    The wander is a sum of squares of the fitted baseline's changes: noise in the coefficients adds to it, so the
+    fitted value sits above the truth by about as much as the draws sit above the fitted value. The pivot
+    interval corrects for that, and the point reported is corrected the same way (2 s - median of the draws), so
+    it lies inside its own interval."""
     idx = [i for i, q in enumerate(fit.layout.params) if q.kind == "drift"]
     if not idx:
-        return 0.0, 0.0
+        return 0.0, (0.0, 0.0)
     rng = np.random.default_rng(0)
     draws = rng.multivariate_normal(fit.x[idx], cov[np.ix_(idx, idx)], size=200, method="eigh")
     vals = []
@@ -129,9 +134,8 @@ def _drift_interval(p: Problem, fit: Fit, cov: np.ndarray, s: float) -> tuple[fl
         x = fit.x.copy()
         x[idx] = d
         vals.append(p.drift_strength(fit.layout, x))
-    lo, hi = np.percentile(vals, [2.5, 97.5])
-    # basic (pivot) interval: the draws scatter about s as s about the truth
-    return max(0.0, 2 * s - float(hi)), max(0.0, 2 * s - float(lo))
+    lo, mid, hi = np.percentile(vals, [2.5, 50.0, 97.5])
+    return max(0.0, 2 * s - float(mid)), (max(0.0, 2 * s - float(hi)), max(0.0, 2 * s - float(lo)))
 
 
-__all__ = ["MAX_EFFECTS", "HeldOut", "Selection", "select", "strength_interval"]
+__all__ = ["MAX_EFFECTS", "HeldOut", "Selection", "select", "strength_estimate"]

@@ -21,7 +21,7 @@ from analysis.gap import tolerances as tol
 from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
-from analysis.gap.ranking import Selection, strength_interval
+from analysis.gap.ranking import Selection, strength_estimate
 from analysis.gap.results import NamedEffect
 
 CLOSED_MIN = 0.5
@@ -83,7 +83,7 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
         assert name is not None
         before, after = sel.steps[k - 1].heldout.rms, step.heldout.rms
         row = next(c for c in step.tried if c.name == name)
-        ci = strength_interval(p, final, name, judge)
+        strength, ci = strength_estimate(p, final, name, judge)
         value = final.effects[name]
         ambiguous = list(step.ambiguous_with)
         notes = []
@@ -105,7 +105,7 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
             verdict = "unexplained"
             notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")
         named.append(NamedEffect(
-            name=name, verdict=verdict, strength=float(value.strength), strength_ci95=(float(ci[0]), float(ci[1])),
+            name=name, verdict=verdict, strength=float(strength), strength_ci95=(float(ci[0]), float(ci[1])),
             shapes=dict(value.shapes), heldout_before=before, heldout_after=after,
             reduction=1.0 - after / before if before > 0 else 0.0, reduction_ci95=row.reduction_ci95,
             closed_fraction=(before - after) / (rms0 - 1.0) if rms0 > 1.0 else 0.0,
