@@ -15,6 +15,7 @@ last predictions, so a column costs the runs it touches."""
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +31,7 @@ LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 GAIN_BOUND = 1.0          # |log gain| (a factor e): far beyond any tolerance, a bound for the solver only
 NAN_RESIDUAL = 1e3        # a row the model cannot evaluate (beyond the linkage's reach)
+RUN_MODEL_CACHE = 64      # predictions kept per run (least recently used dropped): a Jacobian's steps
 DRIFT_RIDGE_N = 2e-3      # prior scale of the baseline coefficients (N): a sensor baseline wanders by mN, not by the
 #                           blocked force; without it near-collinear spline and warm-up columns trade large opposite
 #                           coefficients for phase-dependent offsets
@@ -123,7 +125,7 @@ class Problem:
         # under the tolerance prior
         self.gain_whitening = {g: tol.whitening(next(e.actuator for e in self.engines if self.group_of(e) == g))
                         for g in self.groups}
-        self._cache: list[dict] = [{} for _ in self.engines]
+        self._cache: list[OrderedDict] = [OrderedDict() for _ in self.engines]
         self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
         self.ramp_rates = self._ramp_rates()
 
@@ -311,17 +313,38 @@ class Problem:
         lag = {q: float(x[lay.index[("lag",) + self.chain_of(e, q)]]) for q in self._quantities(e)}
         return RunNuisance(gains, shift, lag)
 
+    def _acts_on(self, k: int, name: str) -> bool:
+        """Can effect `name` change run k's prediction? (The drift is added outside the run model; a design
+        effect needs a leg; contact and stage effects act through the force rows, except the base spring of a
+        leg, which sits in its transmission and so moves a free foot too.)"""
+        kind = FAMILIES[name].kind
+        e = self.engines[k]
+        if kind == "baseline":
+            return False
+        if kind == "design":
+            return e.run.fixture == "leg"
+        if kind in ("contact", "stage"):
+            return bool(e.is_force_row.any()) or (name == "base_compliance" and e.run.fixture == "leg")
+        return True
+
     def _run_model(self, k: int, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+        # keyed on what this run's prediction depends on only, so a finite-difference step in another run's
+        # parameter (or an effect that cannot act on this run) reuses it
         key = (tuple(sorted((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in effects.items()
-                            if n != "sensor_drift")),
+                            if self._acts_on(k, n))),
                nuis.gains, nuis.shift_m, tuple(sorted(nuis.lag_s.items())))
         cache = self._cache[k]
         v = cache.get(key)
-        if v is None:
-            if len(cache) > 24:
-                cache.clear()
-            v = cache[key] = self.engines[k].safe_predict(effects, nuis)
+        if v is not None:
+            cache.move_to_end(key)
+            return v
+        v = cache[key] = self.engines[k].safe_predict(self._acting(k, effects), nuis)
+        while len(cache) > RUN_MODEL_CACHE:
+            cache.popitem(last=False)
         return v
+
+    def _acting(self, k: int, effects: Effects) -> Effects:
+        return {n: v for n, v in effects.items() if self._acts_on(k, n) or FAMILIES[n].kind == "baseline"}
 
     def model(self, lay: Layout, x: np.ndarray) -> np.ndarray:
         effects = self.effects_of(lay, x)
