@@ -379,7 +379,10 @@ class BenchPlant:
             else:
                 y = (st["x"][r] - st["x_s"][r]) + ((st["x"][r + 1] - st["x_s"][r + 1])
                                                    - (st["x"][r] - st["x_s"][r])) * t / self.h
-            force[contact] = np.maximum(self.k_sensor * y, 0.0)
+            # not clipped at 0: in contact the plant and the sensor's element move as one (the contact holds until
+            # the quasi-static force lets go), so ringing after a touchdown carries the element through zero as a
+            # real load cell's does, and the averaged reading (`mean_force_N`) integrates the same signed force
+            force[contact] = self.k_sensor * y
         if self.drift is not None:
             d = st["drift"]
             force += d[row] + (d[row + 1] - d[row]) * (tau / self.h)

@@ -96,7 +96,14 @@ def test_campaign_fits_back_the_bench_parameters(tmp_path):
         for name, value in truth.items():
             lo, hi = g.params[name].ci95
             assert lo <= value <= hi, (design, name, value, g.params[name])
-        assert g.params["k_ser"].status == "identified" and g.params["bias"].status == "identified"
+        assert g.params["k_ser"].status == "identified"
+        # the bias is identified, or the fit says it is not and names what it trades off against (design 2 under
+        # the mixed kappa reading: its stiff kappa_3 and the bias are correlated at |r| > 0.99 on this short
+        # campaign)
+        bias = g.params["bias"]
+        assert bias.status == "identified" or (
+            bias.status == "weakly identified" and any(w.startswith("bias: weakly identified") for w in g.warnings)
+            and any("and bias strongly correlated" in w for w in g.warnings)), (design, bias, g.warnings)
     for layers in (1, 2, 3):
         a = actuator_preset(layers, "effective")
         g = report.actuators[layers]

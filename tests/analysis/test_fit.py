@@ -33,13 +33,16 @@ def test_recovers_design_4_from_quiet_data(method):
     assert g.rms_N < 5 * QUIET.force_step_N + 1e-6
 
 
-def test_intervals_cover_and_verdicts_are_honest():
+def test_verdicts_are_honest_for_a_design_without_flexure_stiffness():
+    """Statuses on one seed; whether the intervals cover the truth is a question over many seeds
+    (test_transmission_interval_coverage_over_fixed_seeds), not one."""
     g = fit_transmission(table_dataset(3, seed=5), 3, "least-squares")
     t = truth(3)
     for name in ("k_ser", "bias"):
         p = g.params[name]
         assert p.status == "identified"
-        assert p.ci95[0] <= t[name] <= p.ci95[1], (name, p)
+        assert p.ci95[0] < p.value < p.ci95[1]
+        assert p.value == pytest.approx(t[name], rel=0.01), (name, p)
     # design 3 has no flexure stiffness: each kappa is consistent with 0 and only bounded from above
     for name in ("kappa_1", "kappa_2", "kappa_3"):
         p = g.params[name]

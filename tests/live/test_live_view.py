@@ -180,8 +180,9 @@ def test_abort_needs_the_token_and_ends_the_run_aborted_with_the_rig_safe(tmp_pa
 
 def test_a_stalled_client_does_not_change_the_recording(tmp_path):
     plain = tmp_path / "plain.mcap"
-    # six repetitions (~6 s wall): long enough that the reading client is subscribed while samples still flow
-    options = ["--seed", "3", "--set", "repetitions=6"]
+    # ten repetitions (~8 s wall): long enough that the reading client is subscribed while samples still flow, on
+    # a loaded machine too (six were not, once, with the test suite and a diagnosis sharing the two cores)
+    options = ["--seed", "3", "--set", "repetitions=10"]
     done = subprocess.run([sys.executable, "-m", "hamr_bench", "run", "free-displacement", "--sim", "--out",
                            str(plain), "--quiet", *options], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

@@ -7,6 +7,7 @@ import sys
 import pytest
 
 from hamr_bench.cli import main
+from hamr_bench.model.designs import DEFAULT_KAPPA_UNITS
 
 
 def _json(argv, capsys):
@@ -35,7 +36,7 @@ def test_model_leg_tests(capsys):
 
 def test_paper_json_carries_kind_margin_band_reproduced(capsys):
     out = _json(["paper", "--json", "--samples", "8"], capsys)
-    assert out["kappa_units"] == "nmm" and out["samples"] == 8
+    assert out["kappa_units"] == DEFAULT_KAPPA_UNITS and out["samples"] == 8
     assert len(out["claims"]) >= 15
     for c in out["claims"]:
         assert {"id", "claim", "paper", "model", "kind", "margin", "band", "reproduced"} <= set(c)

@@ -15,9 +15,12 @@ from tests.reliability.harness import IN_TRANSIT_S
 from tests.replay.conftest import SOURCE_EFFECTS, record
 
 
-def test_aborted_recording_replays_what_it_holds(tmp_path):
-    # The force sensor drops out during the second step: the run fails there.
-    src = record(tmp_path / "aborted.mcap", faults=["force_sensor:disconnect@17.4"])
+def test_aborted_recording_replays_what_it_holds(source_run, tmp_path):
+    # The force sensor drops out during the second step (timed from the same run without the fault, so the test
+    # follows the model's geometry): the run fails there.
+    second_step_s = [e.time_s for e in RecordingReader(source_run).events() if e.kind == "step"][1]
+    fault_s = round(second_step_s + 0.55, 3)
+    src = record(tmp_path / "aborted.mcap", faults=[f"force_sensor:disconnect@{fault_s}"])
     reader = RecordingReader(src)
     assert reader.exit_status == "failed"
     steps = [e for e in reader.events() if e.kind == "step"]
@@ -30,7 +33,7 @@ def test_aborted_recording_replays_what_it_holds(tmp_path):
     assert [e.data for e in twin_reader.events() if e.kind == "step"] == [e.data for e in steps]
     # up to the fault the twin is the source (same seed and effects): compare every stream before it, less the
     # force lines still on their way when the link went (the source lost them with the port; the twin has them)
-    cut_s = 17.4 - IN_TRANSIT_S
+    cut_s = fault_s - IN_TRANSIT_S
     for topic in ("/force", "/stage/position", "/amplifier/drive/command", "/amplifier/bias/monitor"):
         a, b = reader.scalars(topic), twin_reader.scalars(topic)
         ka, kb = a["time_s"] < cut_s, b["time_s"] < cut_s
