@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 
@@ -19,7 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the residual map, overlays and ranking")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
     parser.add_argument("--jobs", type=int, default=None,
-                        help="processes reading the recordings (default: one per core; 1: this process)")
+                        help="processes reading the recordings and fitting the candidates side by side (default: "
+                             "one per core; 1: this process; the result does not depend on it)")
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="read the recordings on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.set_defaults(func=run)
@@ -82,10 +84,15 @@ def run(args: argparse.Namespace) -> int:
     from analysis.gap.families import check_names
     from analysis.gap.features import load_gap_data
 
+    from hamr_bench.errors import ConfigError
+
+    jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
+    if jobs < 1:
+        raise ConfigError(f"--jobs: expected at least 1, got {args.jobs}")
     names = check_names(args.effects.split(",")) if args.effects else None
     params = load_params(args.params)
     data = load_gap_data(args.recordings, jobs=args.jobs, scheduler=args.scheduler)
-    diagnosis = diagnose(data, params, names, seed=args.seed)
+    diagnosis = diagnose(data, params, names, seed=args.seed, jobs=jobs)
     out = diagnosis.to_json()
     out["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
     if args.report:

@@ -16,6 +16,7 @@ from scipy import stats
 
 from analysis.gap import residuals as res
 from analysis.gap.families import CANDIDATES, FAMILIES
+from analysis.gap.fitpool import FitPool
 from analysis.gap.features import GapData
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
@@ -71,7 +72,9 @@ def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
 
 
 def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence[str] | None = None,
-             seed: int = 0) -> Diagnosis:
+             seed: int = 0, jobs: int = 1) -> Diagnosis:
+    """`jobs` > 1: the candidate fits of screening and of each selection step run in that many processes (the
+    result does not depend on it)."""
     t0 = time.perf_counter()
     p = Problem(data, fit_params)
     names = applicable(p, list(candidates or CANDIDATES))
@@ -80,9 +83,11 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     population = population_test(p, nominal)
     gap = lack["p_value"] < GAP_ALPHA or population["p_value"] < GAP_ALPHA
     where = [g.to_json() for g in res.regions(p, nominal.z)]
-    screened, _ = screen(p, nominal, names) if gap else ([], {})
     judge = Judge(p, seed)
-    sel = select(p, nominal, screened, judge, gap)
+    # forked after the nominal fit, so the workers start from its warmed caches
+    with FitPool(p, jobs if gap else 1) as pool:
+        screened, _ = screen(p, nominal, names, pool.add_each) if gap else ([], {})
+        sel = select(p, nominal, screened, judge, gap, pool.add_each)
     named, best, cannot = decide(p, sel, judge)
     final = sel.fits[-1]
     last = sel.steps[-1]

@@ -16,7 +16,7 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import grid_start, n_params, overdispersion
+from analysis.gap.screening import AddEach, add_each_here, n_params, overdispersion
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -36,7 +36,8 @@ def _closed(before: float, after: float) -> float:
     return (before - after) / (before - 1.0) if before > 1.0 else 0.0
 
 
-def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool) -> Selection:
+def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool,
+           add_each: AddEach | None = None) -> Selection:
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
@@ -47,9 +48,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if judge.heldout(current).ci95[0] <= 1.0:
             break   # at the noise floor
-        tried: dict[str, Fit] = {}
-        for name in pool[:MAX_TRIED]:
-            tried[name] = p.solve(tuple(current.names) + (name,), grid_start(p, current, name), max_nfev=40)
+        tried = (add_each or add_each_here(p))(current, pool[:MAX_TRIED], 40)
         scale2 = overdispersion(p, min(tried.values(), key=lambda f: f.objective), 0)
         rows = []
         for name, f in tried.items():

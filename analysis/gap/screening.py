@@ -5,6 +5,7 @@ over-dispersion the best single candidate leaves, at 0.01 / (number of candidate
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy import stats
@@ -56,10 +57,19 @@ def threshold(p: Problem, name: str, scale2: float, n_candidates: int) -> float:
     return float(stats.chi2.ppf(1 - SCREEN_ALPHA / max(n_candidates, 1), n_params(p, name))) * scale2
 
 
-def screen(p: Problem, nominal: Fit, names: list[str]) -> tuple[list[Screened], dict[str, Fit]]:
-    fits: dict[str, Fit] = {}
-    for n in names:
-        fits[n] = p.solve(tuple(nominal.names) + (n,), grid_start(p, nominal, n), max_nfev=25)
+AddEach = Callable[[Fit, Sequence[str], int], dict[str, Fit]]
+
+
+def add_each_here(p: Problem) -> AddEach:
+    """Candidate fits one after another in this process (`fitpool.FitPool.add_each` runs them side by side)."""
+    def add_each(base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
+        return {n: p.solve(tuple(base.names) + (n,), grid_start(p, base, n), max_nfev=max_nfev) for n in names}
+    return add_each
+
+
+def screen(p: Problem, nominal: Fit, names: list[str], add_each: AddEach | None = None
+           ) -> tuple[list[Screened], dict[str, Fit]]:
+    fits = (add_each or add_each_here(p))(nominal, names, 25)
     best = min((f.objective for f in fits.values()), default=nominal.objective)
     scale2 = max(1.0, best / max(p.y.size - len(nominal.layout.params) - 2, 1))
     out = []

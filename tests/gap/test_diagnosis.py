@@ -106,3 +106,15 @@ def test_fit_params_move_the_nominal_model(null_lab):
     assert with_fit.engines[0].actuator.width_nom_m == pytest.approx(1.1 * nominal.engines[0].actuator.width_nom_m)
     lay = nominal.layout(())
     assert not np.allclose(with_fit.model(lay, lay.vector()), nominal.model(lay, lay.vector()), rtol=1e-3)
+
+
+@pytest.mark.slow
+def test_the_diagnosis_does_not_depend_on_jobs(tmp_path):
+    """Candidate fits side by side in forked workers give the same diagnosis as in one process."""
+    data = load_gap_data(write_lab(tmp_path, Effects(creep=0.05), seed=11))
+    one = diagnose(data, jobs=1).to_json()
+    two = diagnose(data, jobs=2).to_json()
+    assert one["gap_above_noise"] and one["screening"]      # the candidate fits did run
+    one.pop("elapsed_s")
+    two.pop("elapsed_s")
+    assert json.dumps(one, sort_keys=True, default=float) == json.dumps(two, sort_keys=True, default=float)

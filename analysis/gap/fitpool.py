@@ -1,0 +1,54 @@
+"""Candidate fits side by side: screening fits every candidate alone on the nominal fit, and each selection step
+fits every promising candidate on the effects named so far; those fits are independent of each other, so with
+`jobs` > 1 they run in worker processes. The workers are forked once the problem is built and inherit it (nothing
+large is sent to them); each returns its `Fit`. The fits are the same numbers as in one process (a fit depends on
+its start and the data only), so the diagnosis does not depend on `jobs`. Where fork is not available (Windows,
+macOS by default) the fits run in this process."""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.screening import add_each_here
+
+_PROBLEM: Problem | None = None      # the problem a forked worker inherited
+
+
+def _add_one(task: tuple[Fit, str, int]) -> Fit:
+    base, name, max_nfev = task
+    assert _PROBLEM is not None  # set before the workers were forked
+    return add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
+
+
+class FitPool:
+    """`add_each(base, names, max_nfev)`: for each name, `base`'s effects plus that one, refitted."""
+
+    def __init__(self, p: Problem, jobs: int = 1) -> None:
+        self.p = p
+        self._pool: Any = None
+        if jobs > 1 and "fork" in multiprocessing.get_all_start_methods():
+            global _PROBLEM
+            _PROBLEM = p
+            self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"))
+
+    def add_each(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
+        if self._pool is None or len(names) < 2:
+            return add_each_here(self.p)(base, names, max_nfev)
+        return dict(zip(names, self._pool.map(_add_one, [(base, n, max_nfev) for n in names]), strict=True))
+
+    def close(self) -> None:
+        global _PROBLEM
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+            _PROBLEM = None
+
+    def __enter__(self) -> FitPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
