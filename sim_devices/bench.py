@@ -280,7 +280,7 @@ class SimBench:
         return {
             "actuator": {k: getattr(a, k) for k in a.__dataclass_fields__ if isinstance(getattr(a, k), float)},
             "design": {"k_ser_N_per_m": d.k_ser_N_per_m, "kappa_N_m_per_rad": list(map(float, d.kappa_N_m_per_rad)),
-                       "bias_m": d.bias_m},
+                       "bias_m": d.bias_m, "kappa_units": d.kappa_units},
             "effects": dict(self.effects),
             "effect_shapes": {k: dict(v) for k, v in self.effect_shapes.items()},
             "specimen_seed": self.settings.specimen_seed,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -16,6 +17,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="run the trials on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.add_argument("--null-fraction", type=float, default=0.15, help="share of no-effect trials")
     parser.add_argument("--decoy-fraction", type=float, default=0.1, help="share of decoy trials")
+    parser.add_argument("--raw", type=Path, metavar="FILE",
+                        help="append each trial's result to FILE as it ends (JSON lines; a long run stopped part way "
+                             "keeps its trials: score them with analysis.gap.selfcheck.score_raw)")
     parser.add_argument("--json", action="store_true", help="print the scores as JSON")
     parser.set_defaults(func=run)
 
@@ -27,10 +31,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--trials: expected at least 1, got {args.trials}")
     if not (args.null_fraction >= 0 and args.decoy_fraction >= 0 and args.null_fraction + args.decoy_fraction <= 1):
         raise ConfigError("--null-fraction and --decoy-fraction: expected shares in [0, 1] summing to at most 1")
+    if args.raw is not None and not args.raw.parent.is_dir():
+        raise ConfigError(f"--raw {args.raw}: the folder {args.raw.parent} does not exist")
     from analysis.gap.selfcheck import selfcheck
 
     out = selfcheck(trials=args.trials, seed=args.seed, jobs=max(1, args.jobs), null_fraction=args.null_fraction,
-                    decoy_fraction=args.decoy_fraction, progress=not args.json, scheduler=args.scheduler)
+                    decoy_fraction=args.decoy_fraction, progress=not args.json, scheduler=args.scheduler,
+                    raw_path=str(args.raw) if args.raw else None)
     if args.json:
         print(json.dumps(out, indent=1, default=float))
     else:
