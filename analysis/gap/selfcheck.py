@@ -22,6 +22,7 @@ forms, the drive timing (inferred from the traces), the specimen draw. The exter
 from __future__ import annotations
 
 import json
+import math
 import tempfile
 import time
 from collections.abc import Callable
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
@@ -145,6 +147,55 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     }
 
 
+# The population test on the specimens' mean gains (2 dof) at the diagnosis's gap level (1e-3): sqrt(chi2_2(0.999))
+DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - 1e-3, 2)))
+
+
+def shift_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
+                 specimens: int = TRIAL_SPECIMENS) -> dict[str, float]:
+    """For each fabrication shift a trial hides, how far it moves the mean of its specimens' gains, in units of
+    the tolerance prior's spread of that mean (sqrt(n) x the Mahalanobis length of the shift's (log stroke,
+    log stiffness) change): the best any method that allows the tolerances can do. Below `DETECTION_SIGMAS` a
+    shift common to every specimen looks like specimen scatter. Recomputed from the trial's seed (no
+    simulation), so a raw file of an earlier run can be scored too."""
+    from analysis.gap import tolerances as tol
+    from hamr_bench.model import actuator_preset
+    from sim_devices.scenarios import draw_scenario
+
+    sc = draw_scenario(seed, null_fraction=null_fraction, decoy_fraction=decoy_fraction, n_specimens=specimens,
+                       fixtures=("actuator",), pool=_draw_pool())
+    a = actuator_preset(sc.layers, sc.params_set)
+    w = tol.whitening(a)
+    out = {}
+    for e in sc.effects:
+        if e.decoy or not e.library_name or e.library_strength is None:
+            continue
+        try:
+            shifted = tol.scaled(a, e.library_name, float(e.library_strength))
+        except KeyError:        # not a fabrication shift
+            continue
+        g = tol.log_outputs(shifted) - tol.log_outputs(a)
+        out[e.library_name] = float(math.sqrt(len(sc.specimens)) * np.linalg.norm(w @ g))
+    return out
+
+
+def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, decoy_fraction: float = 0.1,
+                            specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
+    """Top-1 on single-effect trials split by kind: fabrication shifts above and below their detection limit
+    (`shift_sigmas`), and every other effect. The fractions and specimens must be the run's (they set the
+    draw)."""
+    rows: dict[str, list[int]] = {"shift_above_limit": [0, 0], "shift_below_limit": [0, 0], "other": [0, 0]}
+    for t in trials:
+        if t.kind != "single":
+            continue
+        sig = shift_sigmas(t.seed, null_fraction, decoy_fraction, specimens).get(t.truth[0])
+        key = "other" if sig is None else ("shift_above_limit" if sig >= DETECTION_SIGMAS else "shift_below_limit")
+        rows[key][0] += t.best == t.truth[0]
+        rows[key][1] += 1
+    return {"detection_sigmas": DETECTION_SIGMAS, "top1_single": {k: {"right": v[0], "of": v[1]}
+                                                                  for k, v in rows.items()}}
+
+
 def _trial_worker(args: tuple[int, float, float, int]) -> Trial | str:
     """One trial; a trial that crashes is reported by its seed and error (counted, never scored)."""
     try:
@@ -153,8 +204,10 @@ def _trial_worker(args: tuple[int, float, float, int]) -> Trial | str:
         return f"seed {args[0]}: {type(exc).__name__}: {exc}"
 
 
-def score_raw(raw_path: str | Path) -> dict[str, Any]:
-    """Score the trials of a raw file (`selfcheck(raw_path=...)`), e.g. of a run stopped part way."""
+def score_raw(raw_path: str | Path, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
+              specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
+    """Score the trials of a raw file (`selfcheck(raw_path=...)`), e.g. of a run stopped part way (the fractions
+    and specimens of that run, for the detectability breakdown)."""
     trials, errors = [], []
     for line in Path(raw_path).read_text(encoding="utf-8").splitlines():
         item = json.loads(line)
@@ -164,6 +217,7 @@ def score_raw(raw_path: str | Path) -> dict[str, Any]:
             trials.append(Trial(**item))
     out = score(trials)
     out["errors"] = errors
+    out["detectability"] = detectability_breakdown(trials, null_fraction, decoy_fraction, specimens)
     return out
 
 
@@ -214,6 +268,7 @@ def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: flo
     _run_trials(args, jobs, scheduler, take)
     out = score(done)
     out["errors"] = errors
+    out["detectability"] = detectability_breakdown(done, null_fraction, decoy_fraction, specimens)
     out["seed"] = seed
     out["excluded_from_draw"] = dict(EXCLUDED_FROM_DRAW)
     out["per_trial"] = [t.to_json() for t in done]

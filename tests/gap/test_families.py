@@ -162,3 +162,37 @@ def test_every_family_has_a_unit_bounds_and_shapes_inside_them():
         assert f.unit and f.bounds[0] <= 0.0 <= f.bounds[1]
         for s in f.shapes.values():
             assert s.lo <= s.default <= s.hi and s.prior_sd > 0
+
+
+def test_a_one_sigma_fabrication_change_is_within_one_sigma_of_the_gain_prior():
+    """The gain prior is the tolerances pushed through the closed form (Sigma = sum_k tol_k^2 j_k j_k^T), so a
+    change of one parameter by its own tolerance has a Mahalanobis length of at most 1, and twice that change
+    twice the length: the yardstick `selfcheck.shift_sigmas` measures hidden shifts with."""
+    from analysis.gap import tolerances as tol
+    from hamr_bench.model import actuator_preset
+
+    for layers in (1, 2, 3):
+        a = actuator_preset(layers, "effective")
+        w = tol.whitening(a)
+        for name, t in tol.TOLERANCE.items():
+            one = float(np.linalg.norm(w @ (tol.log_outputs(tol.scaled(a, name, t)) - tol.log_outputs(a))))
+            two = float(np.linalg.norm(w @ (tol.log_outputs(tol.scaled(a, name, 2 * t)) - tol.log_outputs(a))))
+            assert 0.0 < one <= 1.0 + 1e-3, (layers, name, one)
+            assert two == pytest.approx(2 * one, rel=0.1), (layers, name)
+
+
+def test_shift_sigmas_measures_the_hidden_fabrication_shifts_only():
+    from analysis.gap.families import FABRICATION
+    from analysis.gap.selfcheck import EXCLUDED_FROM_DRAW, shift_sigmas
+    from sim_devices.scenarios import LIBRARY_EFFECTS, draw_scenario
+
+    pool = tuple(n for n in LIBRARY_EFFECTS if n not in EXCLUDED_FROM_DRAW)
+    found = 0
+    for seed in range(40):
+        sig = shift_sigmas(seed)
+        sc = draw_scenario(seed, fixtures=("actuator",), pool=pool)
+        fabrication = {e.library_name for e in sc.effects if not e.decoy and e.library_name in FABRICATION}
+        assert set(sig) == fabrication, seed
+        found += bool(sig)
+        assert all(v > 0 for v in sig.values())
+    assert found >= 3
