@@ -396,7 +396,9 @@ class Problem:
         r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
                           jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
                           ftol=1e-6, xtol=1e-6)
-        return self._fit(lay, r.x, r.fun, r.jac)
+        fit = self._fit(lay, r.x, r.fun, r.jac)
+        fit.extra["converged"] = bool(r.status > 0)    # a tolerance met, not stopped by max_nfev
+        return fit
 
     def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:
         j = jac.toarray() if hasattr(jac, "toarray") else np.asarray(jac)

@@ -37,7 +37,9 @@ def _closed(before: float, after: float) -> float:
 
 
 def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool,
-           add_each: AddEach | None = None) -> Selection:
+           add_each: AddEach | None = None, screen_fits: dict[str, Fit] | None = None) -> Selection:
+    """`screen_fits`: the screening's fits (nominal + one candidate); at the first step a converged one is that
+    step's fit of its candidate (the same problem), not fitted again."""
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
@@ -48,7 +50,11 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if judge.heldout(current).ci95[0] <= 1.0:
             break   # at the noise floor
-        tried = (add_each or add_each_here(p))(current, pool[:MAX_TRIED], 40)
+        names = pool[:MAX_TRIED]
+        reuse = {n: screen_fits[n] for n in names if current is nominal and screen_fits and n in screen_fits
+                 and screen_fits[n].extra.get("converged")}
+        fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40)
+        tried = {n: reuse[n] if n in reuse else fitted[n] for n in names}
         scale2 = overdispersion(p, min(tried.values(), key=lambda f: f.objective), 0)
         rows = []
         for name, f in tried.items():
