@@ -50,17 +50,14 @@ def run(jobs: int | None = None, set_options: list[str] | None = None, out_dir: 
 
 
 def _effects(text: str) -> dict[str, float]:
-    """NAME=STRENGTH,... -> {name: strength}; a malformed item is one clear error."""
-    out = {}
-    for item in filter(None, text.split(",")):
-        name, eq, value = item.partition("=")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise SystemExit(f"--effects: expected NAME=STRENGTH, got {item!r}") from None
-        if not eq:
-            raise SystemExit(f"--effects: expected NAME=STRENGTH, got {item!r}")
-    return out
+    """NAME=STRENGTH,... as `hamr-bench run --effects` reads it; a malformed item is one clear line."""
+    from hamr_bench.config import parse_effects
+    from hamr_bench.errors import ConfigError
+
+    try:
+        return parse_effects(text)
+    except ConfigError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -49,14 +49,16 @@ def nominal_fit(p: Problem) -> Fit:
     return p.solve((), p.initial_nuisances(), max_nfev=100)
 
 
+def _whitened_gains(p: Problem, fit: Fit, g: str) -> np.ndarray:
+    """A specimen group's fitted (stroke, stiffness) log gains in units of the tolerance prior."""
+    return p.gain_whitening[g] @ np.array([fit.value("gain", g, 0), fit.value("gain", g, 1)])
+
+
 def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
     """Are the specimens, as a population, where the tolerances put them? chi^2 of their fitted gains under the
     tolerance prior (2 per specimen group). In-sample a shift common to every specimen is absorbed by the gains
     and leaves no lack of fit in the rows: it shows here, as specimens all beyond their tolerances."""
-    chi2 = 0.0
-    for g in p.groups:
-        w = p.gain_whitening[g] @ np.array([fit.value("gain", g, 0), fit.value("gain", g, 1)])
-        chi2 += float(w @ w)
+    chi2 = sum(float(w @ w) for w in (_whitened_gains(p, fit, g) for g in p.groups))
     dof = 2 * len(p.groups)
     return {"chi2": chi2, "dof": dof, "p_value": float(stats.chi2.sf(chi2, dof)) if dof else 1.0}
 
@@ -66,7 +68,7 @@ def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
     out = {}
     for g in p.groups:
         a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
-        score = float(np.linalg.norm(p.gain_whitening[g] @ np.array([a, b])))
+        score = float(np.linalg.norm(_whitened_gains(p, fit, g)))
         out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
     return out
 

@@ -338,13 +338,11 @@ class Problem:
         if v is not None:
             cache.move_to_end(key)
             return v
-        v = cache[key] = self.engines[k].safe_predict(self._acting(k, effects), nuis)
+        acting = {n: e for n, e in effects.items() if self._acts_on(k, n)}
+        v = cache[key] = self.engines[k].safe_predict(acting, nuis)
         while len(cache) > RUN_MODEL_CACHE:
             cache.popitem(last=False)
         return v
-
-    def _acting(self, k: int, effects: Effects) -> Effects:
-        return {n: v for n, v in effects.items() if self._acts_on(k, n) or FAMILIES[n].kind == "baseline"}
 
     def model(self, lay: Layout, x: np.ndarray) -> np.ndarray:
         effects = self.effects_of(lay, x)

@@ -76,7 +76,8 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
             ax.axis("off")
             continue
         rows = [problem.rows[i] for i in idx]
-        use_sag = run.protocol in ("sag-sweep", "static")
+        # against sag where the rows sweep it (sag sweeps, static loads, an actuator's stiffness steps at 0 V)
+        use_sag = run.protocol in ("sag-sweep", "static") or len({r.voltage_V for r in rows}) == 1
         x = np.array([r.sag_m * 1e3 if use_sag else r.voltage_V for r in rows])
         scale = 1e3 if rows[0].quantity == "force_N" else 1e6
         unit = "mN" if rows[0].quantity == "force_N" else "um"
@@ -120,7 +121,7 @@ def waterfall_png(result: dict[str, Any], path: Path) -> None:
     ax.set_xticks(range(len(steps)), labels, fontsize=8)
     ax.set_yscale("log")
     ax.set_ylabel("held-out RMS gap (residual / standard error)")
-    ax.set_title("held-out gap after each named effect (green: attributed, orange: ambiguous or partial)",
+    ax.set_title("held-out gap after each named effect\n(green: attributed, orange: ambiguous or partial)",
                  fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from analysis.gap.diagnose import GAP_ALPHA
+
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
 TRIAL_SPECIMENS = 3
@@ -147,8 +149,8 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     }
 
 
-# The population test on the specimens' mean gains (2 dof) at the diagnosis's gap level (1e-3): sqrt(chi2_2(0.999))
-DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - 1e-3, 2)))
+# The population test on the specimens' mean gains (2 dof) at the diagnosis's gap level: sqrt(chi2_2(1 - alpha))
+DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - GAP_ALPHA, 2)))
 
 
 def shift_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
