@@ -252,7 +252,7 @@ class DriveChain:
 
 
 # ------------------------------------------------------------------ shapes and their defaults
-HYSTERESIS_SHAPE = {"r0": 1.0, "kappa": 0.0}
+HYSTERESIS_SHAPE = {"r0": 1.0, "kappa": 0.3}   # kappa != 0: the density is not a function of alpha - beta alone
 CREEP_SHAPE = {"tau1_s": 0.05, "tau2_s": 1.0, "tau3_s": 20.0, "weight1": 0.3, "weight2": 0.35, "weight3": 0.35}
 D31_SHAPE = {"form": 0.0, "switch_field_V_per_um": 0.8, "width_V_per_um": 0.3, "split": 0.5, "low_tail": 0.15,
              "high_tail": 0.1}

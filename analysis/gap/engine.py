@@ -4,7 +4,7 @@ had (its commanded or inferred timelines).
 
 The drive path, on a uniform grid of DENSE_DT_S:
 
-    plate voltages V_drive, V_bias - V_drive -> d31(E) map -> effective net drive p -> PI hysteresis -> creep
+    plate voltages V_drive, V_bias - V_drive -> d31(E) map -> each plate's hysteresis -> net drive -> creep
 
 then the quasi-static model at the sensor's sample times (minus the sensor chain's lag): the bare actuator's
 closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at 0 for a
@@ -200,14 +200,15 @@ class RunEngine:
                 self._big_keys.remove(old)
         return v
 
-    def _net_drive(self, d31: EffectValue | None, t_p: float) -> np.ndarray:
-        """p = g(V_drive) - g(V_bias - V_drive) on the dense grid (V; g the identity nominally)."""
+    def _plate_drives(self, d31: EffectValue | None, t_p: float) -> np.ndarray:
+        """[g(V_drive), g(V_bias - V_drive)] on the dense grid (shape (2, n)): the bottom and the top plate's
+        voltage through the d31(E) map (V; g the identity nominally)."""
         vb, vd = self.dense_vb, self.dense_vd
         if d31 is None or d31.strength == 0:
-            return 2.0 * vd - vb
+            return np.stack([vd, vb - vd])
         q = d31.shape("curvature", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
-        return (op.plate_map(vd, t_p, d31.strength, q, ref) - op.plate_map(vb - vd, t_p, d31.strength, q, ref))
+        return np.stack([op.plate_map(vd, t_p, d31.strength, q, ref), op.plate_map(vb - vd, t_p, d31.strength, q, ref)])
 
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """The effective net drive on the dense grid after d31(E), hysteresis and creep (V)."""
@@ -222,17 +223,20 @@ class RunEngine:
         d_key = (None if d31 is None or d31.strength == 0 else (d31.strength, d31.shape("curvature",
                                                                                           "field_dependent_d31")),
                  t_p if d31 is not None and d31.strength != 0 else None)
-        p = self._memo(("p",) + d_key, lambda: self._net_drive(d31, t_p))
-        y = p
+        plates = self._memo(("plates",) + d_key, lambda: self._plate_drives(d31, t_p))
+        y = plates[0] - plates[1]
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
-            dev = self._memo(("dev",) + d_key, lambda: op.pi_deviations(p / FULL_SCALE_V))
-            w = op.pi_weights(hy.strength, gamma)
-            y = (p - FULL_SCALE_V * (w @ dev)) / op.pi_full_drive_gain(w)
+            tip = hy.shape("tip_share", "hysteresis")
+            w = op.plate_weights(hy.strength, gamma, tip)
+            memory = [self._memo(("memory", side) + d_key, lambda v=v: op.plate_memory(v / FULL_SCALE_V))
+                      for side, v in enumerate(plates)]
+            y = FULL_SCALE_V * (op.plate_hysteresis(plates[0] / FULL_SCALE_V, memory[0], w, tip)
+                                - op.plate_hysteresis(plates[1] / FULL_SCALE_V, memory[1], w, tip))
         if cr is not None and cr.strength != 0:
             n = cr.shape("exponent", "creep")
-            h_key = None if hy is None or hy.strength == 0 else (hy.strength, hy.shape("density_exponent",
-                                                                                        "hysteresis"))
+            h_key = None if hy is None or hy.strength == 0 else (
+                hy.strength, hy.shape("density_exponent", "hysteresis"), hy.shape("tip_share", "hysteresis"))
             base = y
             resp = self._memo(("creep", n, h_key) + d_key, lambda: op.creep_response(base, DENSE_DT_S, n))
             y = y + cr.strength * resp

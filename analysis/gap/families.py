@@ -4,8 +4,8 @@ pairs side by side):
 
 | candidate | family (shape parameters) | strength |
 |---|---|---|
-| hysteresis | generalised Prandtl-Ishlinskii on the effective net drive; threshold density ~ r^gamma |
-|   | (loop width grows as amplitude^(gamma + 2)) | loop gap at mid-swing / span, full drive |
+| hysteresis | per plate, a weighted sum of plays on the unipolar range (threshold density ~ r^gamma), read |
+|   | back through its first rise (tip share c mixes in the unmapped sum) | largest loop gap / span, full drive |
 | creep | power-law (Nutting) superposition of every drive increment, exponent n; the log law at n = 0 |
 |   | | mean growth per decade, 10 ms - 100 s |
 | field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(250 V) / d31(100 V) - 1 |
@@ -53,9 +53,10 @@ class Family:
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (
-    Family("hysteresis", "loop gap at mid-swing / span, full drive (250 V)", (0.0, 0.3),
-           "generalised Prandtl-Ishlinskii (threshold density ~ r^gamma)", "drive",
-           {"density_exponent": Shape(0.0, -1.5, 1.5, 1.0)}, scale=0.05),
+    Family("hysteresis", "largest rise/fall gap of the net drive / span, full drive cycle (250 V)", (0.0, 0.3),
+           "plays on each plate's unipolar range (threshold density ~ r^gamma), tips on the first rise", "drive",
+           {"density_exponent": Shape(0.0, -0.8, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
+           scale=0.05),
     Family("creep", "mean growth per decade of time over 10 ms - 100 s (fraction of a step)", (0.0, 0.12),
            "power-law superposition of drive increments (log law at n = 0)", "drive",
            {"exponent": Shape(0.1, 0.0, 0.6, 0.3)}, scale=0.01),

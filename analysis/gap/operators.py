@@ -1,31 +1,35 @@
-"""The numerical operators the candidate families are built from: the play operator and the generalised
-Prandtl-Ishlinskii (PI) deviation curves (hysteresis), the power-law creep kernel and its superposition, the
+"""The numerical operators the candidate families are built from: the play operator and each plate's
+play-sum hysteresis, the power-law creep kernel and its superposition, the
 polynomial d31(E) gain, the power-law series spring solved against the actuator, the penalised-spline baseline.
 
 Pure functions of arrays; no knowledge of recordings or runs (`engine.py` applies them)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from scipy.interpolate import BSpline
+from scipy.optimize import brentq
 from scipy.signal import fftconvolve
 
-# ------------------------------------------------------------------ hysteresis: play and PI
-PI_THRESHOLDS = 16   # play radii r_i = (i - 1/2) / N of the full drive, i = 1..N (covers the whole swing)
+# ------------------------------------------------------------------ hysteresis: plays on each plate
+PLATE_PLAYS = 16   # play half-widths r_i = (i - 1/2) / (2 N) of full scale, i = 1..N (the unipolar range)
 
 
-def play(x: np.ndarray, half_width: float, y0: float | None = None) -> np.ndarray:
-    """Play (backlash) operator: the output follows the input only when pushed beyond +-half_width.
+def play(x: np.ndarray, half_width: float, y0: float | None = None, floor: float | None = None) -> np.ndarray:
+    """Play (backlash) operator: the output follows the input only when pushed beyond +-half_width; with
+    `floor`, the output never goes below it (a play on an input range bounded below).
 
     Vectorised over monotone runs of the input: on a rising run the output is max(y_start, x - w), on a falling
-    run min(y_start, x + w); only the runs are looped over."""
+    run min(y_start, x + w) (then the floor); only the runs are looped over."""
     x = np.asarray(x, dtype=float)
     out = np.empty_like(x)
     if x.size == 0:
         return out
     w = abs(half_width)
+    lo = -np.inf if floor is None else floor
     y = float(x[0] if y0 is None else y0)
     d = np.sign(np.diff(x))
     nz = np.flatnonzero(d)
@@ -34,51 +38,92 @@ def play(x: np.ndarray, half_width: float, y0: float | None = None) -> np.ndarra
         dn = d[nz]
         starts += list(nz[1:][dn[1:] != dn[:-1]])
     starts.append(x.size - 1)
-    out[0] = y = min(max(y, x[0] - w), x[0] + w)
+    out[0] = y = max(min(max(y, x[0] - w), x[0] + w), lo)
     for a, b in zip(starts[:-1], starts[1:], strict=True):
         seg = x[a + 1:b + 1]
         if seg.size == 0:
             continue
-        ys = np.maximum(y, seg - w) if seg[-1] >= x[a] else np.minimum(y, seg + w)
+        ys = np.maximum(y, seg - w) if seg[-1] >= x[a] else np.maximum(np.minimum(y, seg + w), lo)
         out[a + 1:b + 1] = ys
         y = float(ys[-1])
     return out
 
 
-def pi_radii() -> np.ndarray:
-    return (np.arange(PI_THRESHOLDS) + 0.5) / PI_THRESHOLDS
+def plate_radii() -> np.ndarray:
+    return (np.arange(PLATE_PLAYS) + 0.5) / (2 * PLATE_PLAYS)
 
 
-def pi_deviations(u: np.ndarray) -> np.ndarray:
-    """D_i(t) = u - play_{r_i}(u) for every radius (shape (N, len(u))), each play relaxed at u[0]. Each lies in
-    [-r_i, r_i]: positive while u rises (the output lags), negative while it falls, and every D_i changes
-    continuously through a reversal, so a weighted sum closes its loops at the reversal points."""
-    return np.array([u - play(u, r, y0=float(u[0])) for r in pi_radii()])
+def plate_memory(x: np.ndarray) -> np.ndarray:
+    """H_i = x - play_i(x) + r_i for every half-width (shape (N, len(x))), x a plate's voltage over full scale
+    (clipped at 0). A unipolar plate's relays all lie above 0 V: each play's output is floored at r_i, so at 0 V
+    every H_i is 0 (the plate's memory is wiped, as it is when a poled plate returns to zero field); each H_i lies
+    in [0, min(x, 2 r_i)] and changes continuously through a reversal."""
+    u = np.maximum(np.asarray(x, dtype=float), 0.0)
+    return np.array([u - play(u, r, y0=r, floor=r) + r for r in plate_radii()])
 
 
-def pi_weights(gap_over_span: float, density_exponent: float) -> np.ndarray:
-    """Weights alpha_i of the PI hysteresis y = (u - sum alpha_i D_i) / G, G = 1 - sum alpha_i r_i (the full-drive
-    gain, so a full-drive cycle keeps its nominal span). Threshold density ~ r^gamma: the loop of a swing +-A has
-    half-width sum alpha_i min(r_i, A - r_i)+, growing as A^(gamma + 2) (gamma = 0: a Rayleigh-like loop whose
-    share of the span grows ~ A). Scaled so that at full drive (A = 1) the loop's full width at mid-swing over the
-    output's span is `gap_over_span`: lambda A1 / (1 - lambda B1) = s."""
-    r = pi_radii()
-    dens = r ** density_exponent
-    a1 = float(np.sum(dens * np.minimum(r, 1.0 - r)))
-    b1 = float(np.sum(dens * r))
-    return gap_over_span / (a1 + gap_over_span * b1) * dens
+def _virgin(x: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The plate operator's first rise from 0 V, normalised to 1 at full scale: piecewise linear, kinks at 2 r_i."""
+    g1 = 1.0 - 2.0 * float(weights @ plate_radii())
+    return (x - np.minimum(np.asarray(x, float)[..., None], 2.0 * plate_radii()) @ weights) / g1
 
 
-def pi_full_drive_gain(weights: np.ndarray) -> float:
-    """Peak-to-peak output over input of a full-drive cycle (u = +-1): 1 - sum alpha_i r_i. The family divides
-    by it, so its loop is a memory effect at full drive and not also a gain change there (the specimens' gains
-    hold the level)."""
-    return 1.0 - float(np.sum(weights * pi_radii()))
+def _virgin_inverse(p: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    grid = np.r_[0.0, 2.0 * plate_radii(), 1.0, 100.0]      # every kink: interpolation is exact
+    return np.interp(p, _virgin(grid, weights), grid)
 
 
-def pi_slope_after_reversal(gap_over_span: float, density_exponent: float) -> float:
-    """dy/du right after a reversal (every play stuck), before the full-drive normalisation: 1 - sum alpha_i."""
-    return 1.0 - float(np.sum(pi_weights(gap_over_span, density_exponent)))
+def plate_hysteresis(x: np.ndarray, memory: np.ndarray, weights: np.ndarray, tip_share: float) -> np.ndarray:
+    """A plate's hysteretic response (full scale 1) to x, given `plate_memory(x)`: P = (x - sum a_i H_i) / G1,
+    G1 = 1 - 2 sum a_i r_i (a first rise to full scale reads 1), then mapped back through the inverse of the
+    first rise, T = v^-1(P): every cycle from 0 V peaks on the nominal line and the loop shows on the ramps.
+    `tip_share` c mixes in the unmapped P, whose partial cycles also peak off the line (an amplitude-dependent
+    gain): (1 - c) T + c P. Beyond 0 V the plate is linear."""
+    xc = np.maximum(np.asarray(x, dtype=float), 0.0)
+    g1 = 1.0 - 2.0 * float(weights @ plate_radii())
+    p = (xc - weights @ memory) / g1
+    out = (1.0 - tip_share) * _virgin_inverse(p, weights) + tip_share * p if tip_share < 1.0 else p
+    return out + (np.asarray(x, dtype=float) - xc)
+
+
+def hysteresis_loop_gap(weights: np.ndarray, tip_share: float, points: int = 401) -> float:
+    """Largest gap between the falling and the rising net drive of a full cycle (bias charged to full scale with
+    the drive at 0, then the drive 0 -> 1 -> 0), over the net span 2: the bench's measurable definition of the
+    strength. In closed form: rising, the bottom plate is on its first rise (U) and the top plate falls from full
+    scale (F); falling, the other way round, so the gap at drive d is F(d) + F(1 - d) - U(d) - U(1 - d)."""
+    d = np.linspace(0.0, 1.0, points)
+    r = plate_radii()
+    g1 = 1.0 - 2.0 * float(weights @ r)
+
+    def fall(x: np.ndarray) -> np.ndarray:      # H_i on the fall from full scale: max(x - 1 + 2 r_i, 0)
+        p = (x - np.maximum(x[:, None] - 1.0 + 2.0 * r, 0.0) @ weights) / g1
+        return (1.0 - tip_share) * _virgin_inverse(p, weights) + tip_share * p
+
+    def rise(x: np.ndarray) -> np.ndarray:
+        return (1.0 - tip_share) * x + tip_share * _virgin(x, weights)
+
+    gap = fall(d) + fall(1.0 - d) - rise(d) - rise(1.0 - d)
+    return float(np.max(np.abs(gap)) / 2.0)
+
+
+@functools.lru_cache(maxsize=4096)
+def plate_weights(gap_over_span: float, density_exponent: float, tip_share: float) -> np.ndarray:
+    """Weights a_i = lambda r_i^gamma of the plays (threshold density ~ r^gamma: gamma > 0 widens the loop faster
+    with amplitude), lambda such that `hysteresis_loop_gap` is `gap_over_span`. The slope right after a reversal,
+    1 - sum a_i, stays above 0.001; a strength beyond what that allows for this gamma saturates there."""
+    dens = plate_radii() ** density_exponent
+    top = 0.999 / float(np.sum(dens))
+    if gap_over_span <= 0.0:
+        return np.zeros_like(dens)
+    if hysteresis_loop_gap(top * dens, tip_share) <= gap_over_span:
+        return top * dens
+    lam = brentq(lambda s: hysteresis_loop_gap(s * dens, tip_share) - gap_over_span, 0.0, top, xtol=1e-12)
+    return lam * dens
+
+
+def slope_after_reversal(weights: np.ndarray) -> float:
+    """dP/dx right after a reversal (every play stuck), before normalisation: 1 - sum a_i."""
+    return 1.0 - float(np.sum(weights))
 
 
 # ------------------------------------------------------------------ creep: power law (log law at n -> 0)

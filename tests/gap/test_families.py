@@ -15,10 +15,10 @@ from hamr_bench.model import actuator as act
 from hamr_bench.model import actuator_preset
 
 
-def _play_reference(x, w):
-    y, out = x[0], []
+def _play_reference(x, w, y0=None, floor=-math.inf):
+    y, out = (x[0] if y0 is None else y0), []
     for xi in x:
-        y = min(max(y, xi - w), xi + w)
+        y = max(min(max(y, xi - w), xi + w), floor)
         out.append(y)
     return np.array(out)
 
@@ -30,53 +30,76 @@ def test_play_matches_its_definition(values, w):
     assert np.allclose(op.play(x, w), _play_reference(x, w))
 
 
-def _pi(u, strength, gamma):
-    w = op.pi_weights(strength, gamma)
-    return (u - w @ op.pi_deviations(u)) / op.pi_full_drive_gain(w)
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(0, 1), min_size=2, max_size=200), st.floats(0.01, 0.5))
+def test_floored_play_matches_its_definition(values, w):
+    x = np.repeat(np.array(values), 2)
+    assert np.allclose(op.play(x, w, y0=w, floor=w), _play_reference(x, w, y0=w, floor=w))
 
 
-def _triangle(amplitude, cycles=4, n=400):
-    t = np.linspace(0, cycles, cycles * n + 1)
-    return amplitude * (2 * np.abs(2 * (t - np.floor(t + 0.5))) - 1)   # starts at -A
+def _plate_reference(x, weights, tip_share):
+    """One plate's response the long way: each floored play sample by sample, the first rise by its definition
+    (a monotone rise from 0 V read off a fine grid) and inverted by interpolation."""
+    r = op.plate_radii()
+    memory = np.array([x - _play_reference(x, ri, y0=ri, floor=ri) + ri for ri in r])
+    g1 = 1 - 2 * weights @ r
+    p = (x - weights @ memory) / g1
+    grid = np.linspace(0, 1, 20001)
+    first_rise = np.array([(g - sum(a * min(g, 2 * ri) for a, ri in zip(weights, r, strict=True))) / g1
+                           for g in grid])
+    return (1 - tip_share) * np.interp(p, first_rise, grid) + tip_share * p
 
 
-def _loop_half_width(u, y, amplitude):
-    """Half the vertical distance between the falling and the rising branch at u = 0, last cycle."""
-    last = slice(len(u) - 401, len(u))
-    uu, yy = u[last], y[last]
-    rising = np.r_[np.diff(uu) > 0, False]
-    up = np.interp(0.0, uu[rising], yy[rising])
-    falling = ~rising
-    order = np.argsort(uu[falling])
-    down = np.interp(0.0, uu[falling][order], yy[falling][order])
-    return 0.5 * (down - up)
+def _net(drive, bias, weights, tip_share):
+    return _plate_reference(drive, weights, tip_share) - _plate_reference(bias - drive, weights, tip_share)
 
 
-@pytest.mark.parametrize("gamma", [-1.0, 0.0, 1.0])
-def test_pi_loop_half_width_at_full_drive_is_the_strength(gamma):
-    u = _triangle(1.0)
-    y = _pi(u, 0.08, gamma)
-    span = y[-401:].max() - y[-401:].min()
-    assert span == pytest.approx(2.0, rel=1e-3)           # the full-drive span is kept
-    assert 2 * _loop_half_width(u, y, 1.0) / span == pytest.approx(0.08, rel=0.03)
+def _full_cycle(n=401):
+    """The strength's cycle: the bias charged to full scale with the drive at 0, then the drive 0 -> 1 -> 0."""
+    up = np.linspace(0, 1, n)
+    drive = np.r_[np.zeros(n), up, up[::-1]]
+    bias = np.r_[up, np.ones(2 * n)]
+    return drive, bias
 
 
-def test_pi_loop_grows_with_amplitude_as_the_density_says():
-    # density ~ r^gamma: half-width ~ A^(gamma + 2), i.e. the loop's share of the span ~ A^(gamma + 1)
-    for gamma in (0.0, 1.0):
-        h = [_loop_half_width(_triangle(a), _pi(_triangle(a), 0.08, gamma), a) for a in (0.4, 0.8)]
-        assert h[1] / h[0] == pytest.approx(2.0 ** (gamma + 2), rel=0.15)
+@pytest.mark.parametrize("strength,gamma,tip", [(0.12, 0.0, 0.0), (0.06, -0.5, 0.0), (0.16, 1.0, 0.5),
+                                               (0.08, 0.5, 1.0)])
+def test_hysteresis_strength_is_the_largest_net_loop_gap_of_a_full_cycle(strength, gamma, tip):
+    drive, bias = _full_cycle()
+    y = _net(drive, bias, op.plate_weights(strength, gamma, tip), tip)
+    n = 401
+    rise, fall = y[n:2 * n], y[2 * n:][::-1]
+    assert rise[-1] == pytest.approx(1.0, abs=1e-3) and fall[0] == pytest.approx(-1.0, abs=1e-3)
+    assert np.max(np.abs(fall - rise)) / 2 == pytest.approx(strength, rel=0.01)
 
 
-def test_pi_loop_closes_at_the_reversals_with_a_finite_slope():
-    u = _triangle(1.0, cycles=3)
-    y = _pi(u, 0.1, 0.0)
-    period = 400
-    # after the first cycle every cycle repeats: the loop closes
-    assert np.allclose(y[period:2 * period], y[2 * period:3 * period], atol=1e-9)
-    # right after a reversal the slope is 1 - sum alpha (> 0), then rises toward 1
-    w = op.pi_weights(0.1, 0.0)
-    assert 0 < op.pi_slope_after_reversal(0.1, 0.0) == pytest.approx(1 - w.sum())
+def test_hysteresis_tips_on_the_first_rise_unless_mixed_and_memory_wiped_at_zero_volts():
+    w = op.plate_weights(0.12, 0.0, 0.0)
+    n = 201
+    cycle = lambda a: np.r_[np.linspace(0, a, n), np.linspace(a, 0, n)[1:]]   # noqa: E731
+    x = np.r_[cycle(1.0), cycle(0.4), cycle(0.4)]
+    y = op.plate_hysteresis(x, op.plate_memory(x), w, 0.0)
+    assert np.allclose(y, _plate_reference(x, w, 0.0), atol=2e-4)
+    first, second = y[2 * n - 1:3 * n - 1], y[4 * n - 2:5 * n - 2]   # the two rises to 0.4
+    assert first[-1] == pytest.approx(0.4, abs=1e-6)                     # the tip on the nominal line
+    assert np.allclose(first, second, atol=1e-9)                          # 0 V wiped the full cycle's memory
+    assert np.max(np.abs(first - np.linspace(0, 0.4, n))) < 1e-9          # a rise from 0 V is the first rise
+    falling = y[3 * n - 2:4 * n - 2][::-1]
+    assert np.max(falling - np.linspace(0, 0.4, n)) > 0.01                # the loop shows on the ramp down
+    mixed = op.plate_hysteresis(x, op.plate_memory(x), op.plate_weights(0.12, 0.0, 1.0), 1.0)
+    assert mixed[3 * n - 2] < 0.4 - 0.01                                  # unmapped: a partial tip below the line
+
+
+def test_hysteresis_loop_grows_faster_with_amplitude_for_a_larger_density_exponent():
+    def share(a, gamma):
+        drive, bias = _full_cycle()
+        drive, bias = a * drive, a * bias
+        y = _net(drive, bias, op.plate_weights(0.1, gamma, 0.0), 0.0)
+        rise, fall = y[401:802], y[802:][::-1]
+        return np.max(np.abs(fall - rise)) / (2 * a)
+    ratios = [share(1.0, g) / share(0.4, g) for g in (-0.5, 1.5)]
+    assert 1.0 < ratios[0] < ratios[1]
+    assert op.slope_after_reversal(op.plate_weights(0.3, -0.8, 0.0)) > 0.0
 
 
 def test_creep_kernel_log_law_limit_and_unit_mean_slope_per_decade():
