@@ -135,9 +135,10 @@ def creep_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
     """phi_n(tau) = ((tau + tau0)^n - 1) / (n ln 10) / m_n (tau in s), log10(tau + tau0) at n = 0: zero at 1 s,
     growing by 1 per decade on average over 10 ms - 100 s (m_n: the mean of the slope (tau)^n per decade there).
     A step grows as 1 + g phi_n(t - t_step): low early, on nominal at 1 s, still creeping after (Nutting's power
-    law; the log law is its n -> 0 limit)."""
+    law; the log law is its n -> 0 limit). n > 0: the growth per decade rises with time; n < 0: it falls, and the
+    creep saturates (most of it early)."""
     t = np.asarray(tau_s, float) + CREEP_TAU0_S
-    if exponent < 1e-6:
+    if abs(exponent) < 1e-6:
         return np.log10(t)
     a, b = CREEP_SPAN_DECADES
     mean_slope = (10.0 ** (exponent * b) - 10.0 ** (exponent * a)) / (exponent * math.log(10.0) * (b - a))

@@ -62,7 +62,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
             rows.append(StepCandidate(name, current.objective - f.objective, ho, judge.reduction_ci(current, f),
                                       float(f.effects[name].strength)))
         rows.sort(key=lambda c: c.heldout.rms)
-        lead = _lead(rows, tried)
+        lead = _lead(rows, tried, judge)
         thr = float(stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, lead.name))) * scale2
         if not (lead.improvement > thr and lead.reduction_ci95[0] > 0):
             rejected = rows
@@ -77,10 +77,12 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     return Selection(steps, fits, alternatives, rejected)
 
 
-def _lead(rows: list[StepCandidate], tried: dict[str, Fit]) -> StepCandidate:
-    """The lowest held-out gap; a tie (within 10 %) goes to the better in-sample objective + 2 x parameters."""
+def _lead(rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge) -> StepCandidate:
+    """The lowest held-out gap, unless the held-out data cannot tell it from another (within 10 %, or their paired
+    difference's interval holding 0): then the better in-sample objective + 2 x parameters leads."""
     best = rows[0]
-    tied = [c for c in rows if c.heldout.rms < TIE_RATIO * best.heldout.rms]
+    tied = [c for c in rows if c.heldout.rms < TIE_RATIO * best.heldout.rms
+            or (c.reduction_ci95[0] > 0 and judge.difference_ci(tried[c.name], tried[best.name])[0] <= 0)]
     return min(tied, key=lambda c: tried[c.name].objective + 2 * len(tried[c.name].layout.params))
 
 

@@ -105,12 +105,20 @@ def test_hysteresis_loop_grows_faster_with_amplitude_for_a_larger_density_expone
 def test_creep_kernel_log_law_limit_and_unit_mean_slope_per_decade():
     # growth from 10 ms to 100 s is 4 decades x 1 per decade for any exponent
     tau = np.array([0.01, 100.0])
-    for n in (0.0, 0.2, 0.5):
+    for n in (-0.4, 0.0, 0.2, 0.5):
         k = op.creep_kernel(tau - op.CREEP_TAU0_S, n)
         assert (k[1] - k[0]) / 4.0 == pytest.approx(1.0, rel=1e-6)
         assert op.creep_kernel(np.array([1.0 - op.CREEP_TAU0_S]), n)[0] == pytest.approx(0.0, abs=1e-9)
     t = np.array([0.01, 0.1, 10.0])
     assert np.allclose(op.creep_kernel(t, 1e-9), np.log10(t + op.CREEP_TAU0_S), atol=1e-6)
+
+
+def test_creep_kernel_growth_per_decade_falls_with_time_for_a_negative_exponent():
+    decades = op.creep_kernel(10.0 ** np.arange(-2.0, 3.0), -0.4)
+    per_decade = np.diff(decades)
+    assert np.all(per_decade > 0) and np.all(np.diff(per_decade) < 0)    # saturating: front-loaded growth
+    rising = np.diff(op.creep_kernel(10.0 ** np.arange(-2.0, 3.0), 0.3))
+    assert np.all(np.diff(rising) > 0)
 
 
 def test_creep_response_of_a_step_is_the_kernel():
