@@ -5,9 +5,13 @@ more: hysteresis shows as rise vs fall, creep as early vs late in a dwell, drift
 lifted. So each driven step is cut, per trapezoid cycle, into windows named by `hamr_bench.protocols.drive.
 phase_labels`' phases:
 
-    low_late   last half of the low dwell          rise   second half of the up ramp
-    high_early first 30 % of the high dwell        high_late last half of the high dwell
-    fall       first half of the down ramp
+    low_late   last half of the low dwell          rise_mid   second quarter of the up ramp
+    rise       second half of the up ramp          high_early first 30 % of the high dwell
+    high_late  last half of the high dwell         fall       first half of the down ramp
+    fall_mid   third quarter of the down ramp
+
+(the mid-ramp windows sample a hysteresis loop where it is widest, and a timing lag where it is uniform along
+the ramp)
 
 and an undriven step (the leg's static test, the actuator's stiffness sweep) into one `hold` window. A row is
 the mean of the sensor over its window, averaged over the step's cycles; its standard error comes from the
@@ -45,7 +49,7 @@ from hamr_bench.recording.drive_timing import Cycle
 from hamr_bench.recording.steps import (Block, DriveTiming, ParsedRun, StepRecord, Timelines, open_reader,
                                         parse_run, sorted_stream)
 
-PHASES = ("low_late", "rise", "high_early", "high_late", "fall")
+PHASES = ("low_late", "rise_mid", "rise", "high_early", "high_late", "fall", "fall_mid")
 
 
 @dataclass
@@ -157,10 +161,12 @@ def cycle_windows(c: Cycle) -> dict[str, tuple[float, float]]:
     """The phase windows of one cycle, from its own corners (absolute times)."""
     dl, dh = c.dwell_low_s, c.dwell_high_s
     return {"low_late": (c.low_start_s + 0.5 * dl, c.rise_start_s),
+            "rise_mid": (c.rise_start_s + 0.25 * c.ramp_up_s, c.rise_start_s + 0.5 * c.ramp_up_s),
             "rise": (c.rise_start_s + 0.5 * c.ramp_up_s, c.high_start_s),
             "high_early": (c.high_start_s, c.high_start_s + 0.3 * dh),
             "high_late": (c.high_start_s + 0.5 * dh, c.fall_start_s),
-            "fall": (c.fall_start_s, c.fall_start_s + 0.5 * c.ramp_down_s)}
+            "fall": (c.fall_start_s, c.fall_start_s + 0.5 * c.ramp_down_s),
+            "fall_mid": (c.fall_start_s + 0.5 * c.ramp_down_s, c.fall_start_s + 0.75 * c.ramp_down_s)}
 
 
 def _in_block(t: np.ndarray, y: np.ndarray, block: Block) -> tuple[np.ndarray, np.ndarray]:

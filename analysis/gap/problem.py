@@ -162,14 +162,17 @@ class Problem:
         return sorted({r.quantity for r in e.rows})
 
     def _ramp_rates(self) -> list[float]:
-        """Distinct ramp durations of the driven steps (s, rounded to 10 %): one rate cannot tell a timing lag
-        from rate-independent hysteresis."""
+        """Distinct ramp durations of the driven cycles (s, rounded to 10 %): one rate cannot tell a timing lag
+        from rate-independent hysteresis. Per cycle, not per step: an imported step can hold repetitions driven
+        at both rates, and its mean ramp is neither."""
         out: list[float] = []
         for e in self.engines:
             for timing in (getattr(e.run, "step_timing", {}) or {}).values():
-                r = float(getattr(timing, "ramp_up_s", 0.0) or 0.0)
-                if r > 0 and not any(abs(r - x) <= 0.1 * x for x in out):
-                    out.append(r)
+                cycles = getattr(timing, "cycles", None) or [timing]
+                for c in cycles:
+                    r = float(getattr(c, "ramp_up_s", 0.0) or 0.0)
+                    if r > 0 and not any(abs(r - x) <= 0.1 * x for x in out):
+                        out.append(r)
         return sorted(out)
 
     # --- layout ----------------------------------------------------------------------------------------------
