@@ -4,7 +4,7 @@ had (its commanded or inferred timelines).
 
 The drive path, on a uniform grid of DENSE_DT_S:
 
-    plate voltages V_drive, V_bias - V_drive -> d31(E) map -> each plate's hysteresis -> net drive -> creep
+    plate voltages V_drive, V_bias - V_drive -> each plate's hysteresis -> x its d31(E) gain -> net drive -> creep
 
 then the quasi-static model at the sensor's sample times (minus the sensor chain's lag): the bare actuator's
 closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at 0 for a
@@ -162,6 +162,7 @@ class RunEngine:
         self.dense_vd = _zoh(run.drive_cmd[0], run.drive_cmd[1], self.dense_t)
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
+        self._memory: list[np.ndarray] | None = None
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
         """Per sample time, its weight in the row's mean of cycle means."""
@@ -200,45 +201,54 @@ class RunEngine:
                 self._big_keys.remove(old)
         return v
 
-    def _plate_drives(self, d31: EffectValue | None, t_p: float) -> np.ndarray:
-        """[g(V_drive), g(V_bias - V_drive)] on the dense grid (shape (2, n)): the bottom and the top plate's
-        voltage through the d31(E) map (V; g the identity nominally)."""
+    def _plate_gains(self, d31: EffectValue, t_p: float) -> np.ndarray:
+        """[G(V_drive), G(V_bias - V_drive)] on the dense grid (shape (2, n)): each plate's d31 relative to the
+        nominal one at its voltage."""
         vb, vd = self.dense_vb, self.dense_vd
-        if d31 is None or d31.strength == 0:
-            return np.stack([vd, vb - vd])
         q = d31.shape("curvature", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
-        return np.stack([op.plate_map(vd, t_p, d31.strength, q, ref), op.plate_map(vb - vd, t_p, d31.strength, q, ref)])
+        return np.stack([op.plate_gain(v, t_p, d31.strength, q, ref) for v in (vd, vb - vd)])
+
+    def _plate_memory(self) -> list[np.ndarray]:
+        """Each plate's play memory (`operators.plate_memory`): it depends on the drive alone, so it is computed
+        once per run and kept outside the size-limited memo."""
+        if self._memory is None:
+            self._memory = [op.plate_memory(v / FULL_SCALE_V) for v in (self.dense_vd, self.dense_vb - self.dense_vd)]
+        return self._memory
 
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
-        """The effective net drive on the dense grid after d31(E), hysteresis and creep (V)."""
+        """The effective net drive on the dense grid after hysteresis, d31(E) and creep (V)."""
         key = ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
                                   if FAMILIES[n].kind == "drive")
         return self._memo(key, lambda: self._effective_drive(effects, t_p))
 
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
+        """Per plate: its voltage, through its hysteresis (the switching thresholds are fields: the plate's own
+        voltage, not a d31-scaled one, so a plate's memory is computed once), times its d31(E) gain; the net drive
+        bottom - top; then creep."""
         d31 = effects.get("field_dependent_d31")
         hy = effects.get("hysteresis")
         cr = effects.get("creep")
-        d_key = (None if d31 is None or d31.strength == 0 else (d31.strength, d31.shape("curvature",
-                                                                                          "field_dependent_d31")),
-                 t_p if d31 is not None and d31.strength != 0 else None)
-        plates = self._memo(("plates",) + d_key, lambda: self._plate_drives(d31, t_p))
-        y = plates[0] - plates[1]
+        vd, vt = self.dense_vd, self.dense_vb - self.dense_vd
+        plates = np.stack([vd, vt])
+        h_key = None
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
             tip = hy.shape("tip_share", "hysteresis")
+            h_key = (hy.strength, gamma, tip)
             w = op.plate_weights(hy.strength, gamma, tip)
-            memory = [self._memo(("memory", side) + d_key, lambda v=v: op.plate_memory(v / FULL_SCALE_V))
-                      for side, v in enumerate(plates)]
-            y = FULL_SCALE_V * (op.plate_hysteresis(plates[0] / FULL_SCALE_V, memory[0], w, tip)
-                                - op.plate_hysteresis(plates[1] / FULL_SCALE_V, memory[1], w, tip))
+            memory = self._plate_memory()
+            plates = FULL_SCALE_V * np.stack([op.plate_hysteresis(vd / FULL_SCALE_V, memory[0], w, tip),
+                                              op.plate_hysteresis(vt / FULL_SCALE_V, memory[1], w, tip)])
+        d_key = None
+        if d31 is not None and d31.strength != 0:
+            d_key = (d31.strength, d31.shape("curvature", "field_dependent_d31"), t_p)
+            plates = plates * self._memo(("gain",) + d_key, lambda: self._plate_gains(d31, t_p))
+        y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
             n = cr.shape("exponent", "creep")
-            h_key = None if hy is None or hy.strength == 0 else (
-                hy.strength, hy.shape("density_exponent", "hysteresis"), hy.shape("tip_share", "hysteresis"))
             base = y
-            resp = self._memo(("creep", n, h_key) + d_key, lambda: op.creep_response(base, DENSE_DT_S, n))
+            resp = self._memo(("creep", n, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n))
             y = y + cr.strength * resp
         return y
 

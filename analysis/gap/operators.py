@@ -31,13 +31,7 @@ def play(x: np.ndarray, half_width: float, y0: float | None = None, floor: float
     w = abs(half_width)
     lo = -np.inf if floor is None else floor
     y = float(x[0] if y0 is None else y0)
-    d = np.sign(np.diff(x))
-    nz = np.flatnonzero(d)
-    starts = [0]
-    if nz.size:
-        dn = d[nz]
-        starts += list(nz[1:][dn[1:] != dn[:-1]])
-    starts.append(x.size - 1)
+    starts = _monotone_runs(x)
     out[0] = y = max(min(max(y, x[0] - w), x[0] + w), lo)
     for a, b in zip(starts[:-1], starts[1:], strict=True):
         seg = x[a + 1:b + 1]
@@ -53,13 +47,44 @@ def plate_radii() -> np.ndarray:
     return (np.arange(PLATE_PLAYS) + 0.5) / (2 * PLATE_PLAYS)
 
 
+def _monotone_runs(x: np.ndarray) -> list[int]:
+    """Indices where the input's direction changes (flat stretches join the run before them), with 0 and the end."""
+    d = np.sign(np.diff(x))
+    nz = np.flatnonzero(d)
+    starts = [0]
+    if nz.size:
+        dn = d[nz]
+        starts += list(nz[1:][dn[1:] != dn[:-1]])
+    starts.append(x.size - 1)
+    return starts
+
+
 def plate_memory(x: np.ndarray) -> np.ndarray:
     """H_i = x - play_i(x) + r_i for every half-width (shape (N, len(x))), x a plate's voltage over full scale
     (clipped at 0). A unipolar plate's relays all lie above 0 V: each play's output is floored at r_i, so at 0 V
     every H_i is 0 (the plate's memory is wiped, as it is when a poled plate returns to zero field); each H_i lies
-    in [0, min(x, 2 r_i)] and changes continuously through a reversal."""
+    in [0, min(x, 2 r_i)] and changes continuously through a reversal. Every play shares the input's monotone
+    runs, so the runs are looped over once for all half-widths (`play` per half-width is the definition)."""
     u = np.maximum(np.asarray(x, dtype=float), 0.0)
-    return np.array([u - play(u, r, y0=r, floor=r) + r for r in plate_radii()])
+    r = plate_radii()
+    out = np.empty((r.size, u.size))
+    if u.size == 0:
+        return out
+    y = np.maximum(np.minimum(np.maximum(r, u[0] - r), u[0] + r), r)
+    out[:, 0] = y
+    starts = _monotone_runs(u)
+    col = r[:, None]
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        seg = u[a + 1:b + 1]
+        if seg.size == 0:
+            continue
+        if seg[-1] >= u[a]:
+            ys = np.maximum(y[:, None], seg[None, :] - col)
+        else:
+            ys = np.maximum(np.minimum(y[:, None], seg[None, :] + col), col)
+        out[:, a + 1:b + 1] = ys
+        y = ys[:, -1]
+    return u[None, :] - out + col
 
 
 def _virgin(x: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -114,11 +139,14 @@ def plate_weights(gap_over_span: float, density_exponent: float, tip_share: floa
     dens = plate_radii() ** density_exponent
     top = 0.999 / float(np.sum(dens))
     if gap_over_span <= 0.0:
-        return np.zeros_like(dens)
-    if hysteresis_loop_gap(top * dens, tip_share) <= gap_over_span:
-        return top * dens
-    lam = brentq(lambda s: hysteresis_loop_gap(s * dens, tip_share) - gap_over_span, 0.0, top, xtol=1e-12)
-    return lam * dens
+        lam = 0.0
+    elif hysteresis_loop_gap(top * dens, tip_share) <= gap_over_span:
+        lam = top
+    else:
+        lam = brentq(lambda s: hysteresis_loop_gap(s * dens, tip_share) - gap_over_span, 0.0, top, xtol=1e-12)
+    weights = lam * dens
+    weights.flags.writeable = False      # cached: shared by every caller
+    return weights
 
 
 def slope_after_reversal(weights: np.ndarray) -> float:
@@ -177,14 +205,21 @@ def d31_slope(strength: float, curvature: float, pzt_thickness_m: float) -> floa
     return strength / den if abs(den) > 1e-12 else 0.0
 
 
-def plate_map(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
-              ref_thickness_m: float | None = None) -> np.ndarray:
-    """Effective plate voltage v G(E) / G(E_anchor): the strain a plate makes with the field-dependent d31, in
-    volts of the nominal d31. The strength refers to the nominal plate `ref_thickness_m` (default: this one)."""
+def plate_gain(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
+               ref_thickness_m: float | None = None) -> np.ndarray:
+    """G(E) / G(E_anchor) at a plate's voltage: its d31 relative to the nominal one. The strength refers to the
+    nominal plate `ref_thickness_m` (default: this one)."""
     a = d31_slope(strength, curvature, ref_thickness_m or pzt_thickness_m)
     e = np.abs(v_V) / pzt_thickness_m * 1e-6
     anchor = float(d31_gain(np.array([D31_ANCHOR_V_PER_UM]), a, curvature)[0])
-    return v_V * d31_gain(e, a, curvature) / anchor
+    return d31_gain(e, a, curvature) / anchor
+
+
+def plate_map(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
+              ref_thickness_m: float | None = None) -> np.ndarray:
+    """Effective plate voltage v G(E) / G(E_anchor): the strain a plate makes with the field-dependent d31, in
+    volts of the nominal d31."""
+    return v_V * plate_gain(v_V, pzt_thickness_m, strength, curvature, ref_thickness_m)
 
 
 # ------------------------------------------------------------------ series spring (power law, push / pull)
