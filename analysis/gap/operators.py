@@ -18,29 +18,41 @@ from scipy.signal import fftconvolve
 PLATE_PLAYS = 16   # play half-widths r_i = (i - 1/2) / (2 N) of full scale, i = 1..N (the unipolar range)
 
 
-def play(x: np.ndarray, half_width: float, y0: float | None = None, floor: float | None = None) -> np.ndarray:
-    """Play (backlash) operator: the output follows the input only when pushed beyond +-half_width; with
-    `floor`, the output never goes below it (a play on an input range bounded below).
+def plays(x: np.ndarray, half_widths: np.ndarray, y0: np.ndarray | None = None,
+          floor: np.ndarray | None = None) -> np.ndarray:
+    """Play (backlash) operators of several half-widths on one input (shape (N, len(x))): each output follows the
+    input only when pushed beyond +-its half-width; with `floor`, an output never goes below its floor (a play on
+    an input range bounded below). `y0`: the outputs before the first sample (default: the first input).
 
-    Vectorised over monotone runs of the input: on a rising run the output is max(y_start, x - w), on a falling
-    run min(y_start, x + w) (then the floor); only the runs are looped over."""
+    Every play shares the input's monotone runs, so only the runs are looped over, once for all half-widths: on a
+    rising run an output is max(y_start, x - w), on a falling run min(y_start, x + w), then its floor."""
     x = np.asarray(x, dtype=float)
-    out = np.empty_like(x)
+    w = np.abs(np.asarray(half_widths, dtype=float))[:, None]
+    lo = np.full_like(w, -np.inf) if floor is None else np.asarray(floor, dtype=float)[:, None]
+    out = np.empty((w.shape[0], x.size))
     if x.size == 0:
         return out
-    w = abs(half_width)
-    lo = -np.inf if floor is None else floor
-    y = float(x[0] if y0 is None else y0)
+    start = np.full(w.shape[0], x[0]) if y0 is None else np.asarray(y0, dtype=float)
+    y = np.maximum(np.minimum(np.maximum(start, x[0] - w[:, 0]), x[0] + w[:, 0]), lo[:, 0])
+    out[:, 0] = y
     starts = _monotone_runs(x)
-    out[0] = y = max(min(max(y, x[0] - w), x[0] + w), lo)
     for a, b in zip(starts[:-1], starts[1:], strict=True):
         seg = x[a + 1:b + 1]
         if seg.size == 0:
             continue
-        ys = np.maximum(y, seg - w) if seg[-1] >= x[a] else np.maximum(np.minimum(y, seg + w), lo)
-        out[a + 1:b + 1] = ys
-        y = float(ys[-1])
+        if seg[-1] >= x[a]:
+            ys = np.maximum(y[:, None], seg[None, :] - w)
+        else:
+            ys = np.maximum(np.minimum(y[:, None], seg[None, :] + w), lo)
+        out[:, a + 1:b + 1] = ys
+        y = ys[:, -1]
     return out
+
+
+def play(x: np.ndarray, half_width: float, y0: float | None = None, floor: float | None = None) -> np.ndarray:
+    """One play operator (`plays` with a single half-width)."""
+    return plays(x, np.array([half_width]), None if y0 is None else np.array([y0]),
+                 None if floor is None else np.array([floor]))[0]
 
 
 def plate_radii() -> np.ndarray:
@@ -63,28 +75,10 @@ def plate_memory(x: np.ndarray) -> np.ndarray:
     """H_i = x - play_i(x) + r_i for every half-width (shape (N, len(x))), x a plate's voltage over full scale
     (clipped at 0). A unipolar plate's relays all lie above 0 V: each play's output is floored at r_i, so at 0 V
     every H_i is 0 (the plate's memory is wiped, as it is when a poled plate returns to zero field); each H_i lies
-    in [0, min(x, 2 r_i)] and changes continuously through a reversal. Every play shares the input's monotone
-    runs, so the runs are looped over once for all half-widths (`play` per half-width is the definition)."""
+    in [0, min(x, 2 r_i)] and changes continuously through a reversal."""
     u = np.maximum(np.asarray(x, dtype=float), 0.0)
     r = plate_radii()
-    out = np.empty((r.size, u.size))
-    if u.size == 0:
-        return out
-    y = np.maximum(np.minimum(np.maximum(r, u[0] - r), u[0] + r), r)
-    out[:, 0] = y
-    starts = _monotone_runs(u)
-    col = r[:, None]
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        seg = u[a + 1:b + 1]
-        if seg.size == 0:
-            continue
-        if seg[-1] >= u[a]:
-            ys = np.maximum(y[:, None], seg[None, :] - col)
-        else:
-            ys = np.maximum(np.minimum(y[:, None], seg[None, :] + col), col)
-        out[:, a + 1:b + 1] = ys
-        y = ys[:, -1]
-    return u[None, :] - out + col
+    return u[None, :] - plays(u, r, y0=r, floor=r) + r[:, None]
 
 
 def _virgin(x: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -98,6 +92,13 @@ def _virgin_inverse(p: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.interp(p, _virgin(grid, weights), grid)
 
 
+def _read_back(p: np.ndarray, weights: np.ndarray, tip_share: float) -> np.ndarray:
+    """(1 - c) v^-1(P) + c P: the play sum read back through its first rise, mixed with the unmapped sum."""
+    if tip_share >= 1.0:
+        return p
+    return (1.0 - tip_share) * _virgin_inverse(p, weights) + tip_share * p
+
+
 def plate_hysteresis(x: np.ndarray, memory: np.ndarray, weights: np.ndarray, tip_share: float) -> np.ndarray:
     """A plate's hysteretic response (full scale 1) to x, given `plate_memory(x)`: P = (x - sum a_i H_i) / G1,
     G1 = 1 - 2 sum a_i r_i (a first rise to full scale reads 1), then mapped back through the inverse of the
@@ -106,9 +107,7 @@ def plate_hysteresis(x: np.ndarray, memory: np.ndarray, weights: np.ndarray, tip
     gain): (1 - c) T + c P. Beyond 0 V the plate is linear."""
     xc = np.maximum(np.asarray(x, dtype=float), 0.0)
     g1 = 1.0 - 2.0 * float(weights @ plate_radii())
-    p = (xc - weights @ memory) / g1
-    out = (1.0 - tip_share) * _virgin_inverse(p, weights) + tip_share * p if tip_share < 1.0 else p
-    return out + (np.asarray(x, dtype=float) - xc)
+    return _read_back((xc - weights @ memory) / g1, weights, tip_share) + (np.asarray(x, dtype=float) - xc)
 
 
 def hysteresis_loop_gap(weights: np.ndarray, tip_share: float, points: int = 401) -> float:
@@ -121,8 +120,7 @@ def hysteresis_loop_gap(weights: np.ndarray, tip_share: float, points: int = 401
     g1 = 1.0 - 2.0 * float(weights @ r)
 
     def fall(x: np.ndarray) -> np.ndarray:      # H_i on the fall from full scale: max(x - 1 + 2 r_i, 0)
-        p = (x - np.maximum(x[:, None] - 1.0 + 2.0 * r, 0.0) @ weights) / g1
-        return (1.0 - tip_share) * _virgin_inverse(p, weights) + tip_share * p
+        return _read_back((x - np.maximum(x[:, None] - 1.0 + 2.0 * r, 0.0) @ weights) / g1, weights, tip_share)
 
     def rise(x: np.ndarray) -> np.ndarray:
         return (1.0 - tip_share) * x + tip_share * _virgin(x, weights)
@@ -213,13 +211,6 @@ def plate_gain(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvatu
     e = np.abs(v_V) / pzt_thickness_m * 1e-6
     anchor = float(d31_gain(np.array([D31_ANCHOR_V_PER_UM]), a, curvature)[0])
     return d31_gain(e, a, curvature) / anchor
-
-
-def plate_map(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
-              ref_thickness_m: float | None = None) -> np.ndarray:
-    """Effective plate voltage v G(E) / G(E_anchor): the strain a plate makes with the field-dependent d31, in
-    volts of the nominal d31."""
-    return v_V * plate_gain(v_V, pzt_thickness_m, strength, curvature, ref_thickness_m)
 
 
 # ------------------------------------------------------------------ series spring (power law, push / pull)
