@@ -180,31 +180,39 @@ def test_abort_needs_the_token_and_ends_the_run_aborted_with_the_rig_safe(tmp_pa
 
 def test_a_stalled_client_does_not_change_the_recording(tmp_path):
     plain = tmp_path / "plain.mcap"
-    # ten repetitions (~8 s wall): long enough that the reading client is subscribed while samples still flow, on
-    # a loaded machine too (six were not, once, with the test suite and a diagnosis sharing the two cores)
+    # ten repetitions (~5-8 s wall): usually long enough that the reading client is subscribed while samples still
+    # flow; on a loaded machine the run can end before its subscription arrives (it happened once in CI), so such
+    # a run is watched again, up to three times. The recording must equal the plain one on every attempt.
     options = ["--seed", "3", "--set", "repetitions=10"]
     done = subprocess.run([sys.executable, "-m", "hamr_bench", "run", "free-displacement", "--sim", "--out",
                            str(plain), "--quiet", *options], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    run = LiveRun("free-displacement", tmp_path / "watched.mcap", *options)
-    stalled = FoxgloveClient(run.url, stall=True)
-    reading = FoxgloveClient(run.url, topics={"/force"}, keep_payloads=False)
-    try:
-        stalled.start()
-        reading.start()
-        code, err = run.wait()
-    finally:
-        run.kill()
-        reading.close()
-        stalled.close()
-    assert code == 0, err
-    assert reading.counts.get("/force", 0) > 0  # the other client was served all along
-    a, b = file_messages(plain, relative=True), file_messages(run.out, relative=True)
-    assert a.keys() == b.keys()
-    for topic in a:
-        assert a[topic] == b[topic], f"{topic} differs"
-    watched = RecordingReader(run.out).metadata()["run_end"]
-    assert watched["dropped_total"] == "0" and watched["late_by_topic"] == RecordingReader(plain).metadata()[
-        "run_end"]["late_by_topic"]
-    assert np.array_equal(RecordingReader(plain).scalars("/camera/displacement")["y_px"],
-                          RecordingReader(run.out).scalars("/camera/displacement")["y_px"])
+    a = file_messages(plain, relative=True)
+    for attempt in range(3):
+        run = LiveRun("free-displacement", tmp_path / f"watched{attempt}.mcap", *options)
+        stalled = FoxgloveClient(run.url, stall=True)
+        reading = FoxgloveClient(run.url, topics={"/force"}, keep_payloads=False)
+        try:
+            stalled.start()
+            reading.start()
+            code, err = run.wait()
+        finally:
+            run.kill()
+            reading.close()
+            stalled.close()
+        assert code == 0, err
+        b = file_messages(run.out, relative=True)
+        assert a.keys() == b.keys()
+        for topic in a:
+            assert a[topic] == b[topic], f"{topic} differs"
+        watched = RecordingReader(run.out).metadata()["run_end"]
+        assert watched["dropped_total"] == "0" and watched["late_by_topic"] == RecordingReader(plain).metadata()[
+            "run_end"]["late_by_topic"]
+        assert np.array_equal(RecordingReader(plain).scalars("/camera/displacement")["y_px"],
+                              RecordingReader(run.out).scalars("/camera/displacement")["y_px"])
+        if reading.counts.get("/force", 0) > 0:
+            break
+    # the other client was served all along
+    assert reading.counts.get("/force", 0) > 0, (
+        f"reading client: counts {reading.counts}, channels {sorted(c.topic for c in reading.channels.values())}, "
+        f"errors {reading.errors}; stalled client errors {stalled.errors}; run: {err}")
