@@ -38,6 +38,7 @@ DENSE_DT_S = 1e-3
 MEMO_ARRAYS = 10
 REFERENCE_ACTUATOR = actuator_preset(2, "effective")
 MEMO_ITEMS = 400
+AT_CACHE = 8  # drives at the sample times kept per run (RunEngine._drive_at)
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,8 @@ class RunEngine:
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
         self._memory: list[np.ndarray] | None = None
+        self._at: dict[tuple, np.ndarray] = {}
+        self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
         """Per sample time, its weight in the row's mean of cycle means."""
@@ -216,11 +219,27 @@ class RunEngine:
             self._memory = [op.plate_memory(v / FULL_SCALE_V) for v in (self.dense_vd, self.dense_vb - self.dense_vd)]
         return self._memory
 
+    @staticmethod
+    def _drive_key(effects: Effects, t_p: float) -> tuple:
+        return ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
+                                  if FAMILIES[n].kind == "drive")
+
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """The effective net drive on the dense grid after hysteresis, d31(E) and creep (V)."""
-        key = ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
-                                  if FAMILIES[n].kind == "drive")
-        return self._memo(key, lambda: self._effective_drive(effects, t_p))
+        return self._memo(self._drive_key(effects, t_p), lambda: self._effective_drive(effects, t_p))
+
+    def _drive_at(self, times: str, te: np.ndarray, lags: tuple[float, float], effects: Effects,
+                  t_p: float) -> np.ndarray:
+        """The effective drive at the lagged sample times `te` of `times` ("t": the rows' samples, "rt": the camera
+        reference's). Kept for the last few (drive, lags): a Jacobian's columns for gains, contact shifts and
+        drift coefficients leave both alone, and the interpolation would be repeated for each."""
+        key = (times, lags) + self._drive_key(effects, t_p)
+        y = self._at.get(key)
+        if y is None:
+            if len(self._at) >= AT_CACHE:
+                self._at.pop(next(iter(self._at)))
+            y = self._at[key] = np.interp(te, self.dense_t, self.effective_drive(effects, t_p))
+        return y
 
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """Per plate: its voltage, through its hysteresis (the switching thresholds are fields: the plate's own
@@ -291,11 +310,12 @@ class RunEngine:
         return out
 
     # --- the prediction -----------------------------------------------------------------------------------
-    def _values(self, t: np.ndarray, is_force: np.ndarray, effects: Effects, nuis: RunNuisance) -> np.ndarray:
+    def _values(self, times: str, t: np.ndarray, is_force: np.ndarray, effects: Effects,
+                nuis: RunNuisance) -> np.ndarray:
         a = self.actuator_for(effects, nuis.gains)
-        lag = np.where(is_force, nuis.lag_s.get("force_N", 0.0), nuis.lag_s.get("displacement_m", 0.0))
-        te = t - lag
-        y = np.interp(te, self.dense_t, self.effective_drive(effects, a.pzt_thickness_m))
+        lags = (nuis.lag_s.get("force_N", 0.0), nuis.lag_s.get("displacement_m", 0.0))
+        te = t - np.where(is_force, *lags)
+        y = self._drive_at(times, te, lags, effects, a.pzt_thickness_m)
         backlash = effects.get("stage_backlash")
         b = backlash.strength if backlash is not None else 0.0
         out = np.zeros(t.shape)
@@ -346,10 +366,10 @@ class RunEngine:
     def predict(self, effects: Effects, nuis: RunNuisance) -> np.ndarray:
         """Model value per row (mean of cycle means over the row's sample times, minus the camera reference).
         Raises HamrBenchError where the effects put the linkage beyond its reach."""
-        v = self._values(self.t, self.eval_is_force, effects, nuis)
+        v = self._values("t", self.t, self.eval_is_force, effects, nuis)
         out = self._row_mean(v, self.row_of, self._w)
         if self._rw is not None:
-            r = self._values(self.rt, np.zeros(self.rt.size, bool), effects, nuis)
+            r = self._values("rt", self.rt, np.zeros(self.rt.size, bool), effects, nuis)
             out -= self._row_mean(r, self.rrow, self._rw)
         return out
 
@@ -368,10 +388,12 @@ class RunEngine:
             return np.zeros((self.n_rows, 0))
         tf = self.t[self.eval_is_force]
         t0, t1 = float(tf.min()), float(tf.max())
-        spline = op.spline_basis(self.t, t0, t1, max(knot_s, (t1 - t0) / 8.0))
-        warm = op.warm_up(self.t - t0, 10.0 ** log10_tau_s)
-        cols = np.column_stack([spline, warm])
-        out = np.array([self.row_means(cols[:, j]) for j in range(cols.shape[1])]).T
+        spline = self._spline_rows.get(knot_s)
+        if spline is None:  # the spline's columns do not depend on the warm-up's time constant, which is fitted
+            basis = op.spline_basis(self.t, t0, t1, max(knot_s, (t1 - t0) / 8.0))
+            spline = self._spline_rows[knot_s] = np.array([self.row_means(c) for c in basis.T]).T
+        warm = self.row_means(op.warm_up(self.t - t0, 10.0 ** log10_tau_s))
+        out = np.column_stack([spline, warm])
         out[~self.is_force_row] = 0.0
         return out
 

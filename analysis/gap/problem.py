@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import coo_matrix
 
 from analysis.gap import tolerances as tol
 from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance
@@ -227,7 +227,8 @@ class Problem:
 
     def _sparsity(self, lay: Layout) -> object:
         n_res = lay.n_rows + lay.n_prior
-        s = lil_matrix((n_res, len(lay.params)), dtype=int)
+        row_idx: list[np.ndarray] = []
+        col_idx: list[np.ndarray] = []
         prior_of = self.prior_rows(lay)
         everything = np.ones(self.y.size, bool)
         force_rows = np.array([r.quantity == "force_N" for r in self.rows])
@@ -243,11 +244,11 @@ class Problem:
             else:   # drift coefficient of run k
                 rows = np.zeros(self.y.size, bool)
                 rows[self.slices[p.key[0]]] = True
-            for row in np.flatnonzero(rows).tolist():
-                s[row, i] = 1
-            for j in prior_of.get(i, []):
-                s[lay.n_rows + j, i] = 1
-        return s.tocsr()
+            hit = np.r_[np.flatnonzero(rows), lay.n_rows + np.asarray(prior_of.get(i, []), dtype=int)]
+            row_idx.append(hit)
+            col_idx.append(np.full(hit.size, i))
+        r, c = np.concatenate(row_idx), np.concatenate(col_idx)
+        return coo_matrix((np.ones(r.size, dtype=int), (r, c)), shape=(n_res, len(lay.params))).tocsr()
 
     def prior_rows(self, lay: Layout) -> dict[int, list[int]]:
         """Parameter index -> the prior rows it enters (offsets after the data rows), in `_prior` order."""

@@ -26,6 +26,7 @@ on a coarse grid across the linkage's range, the stable crossing (G from - to +)
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -42,6 +43,29 @@ from hamr_bench.model.flexures import SerialChain
 DEFAULT_VOLTAGE_LIMIT_V = 250.0
 _GRID_POINTS = 97
 _ILLINOIS_STEPS = 40
+
+
+_CACHE_SIZE = 4096
+_NEUTRAL_CACHE: dict[tuple, float] = {}  # the undriven equilibrium of a powertrain, by what it depends on
+
+
+@lru_cache(maxsize=_CACHE_SIZE)
+def _closing_range(g: tr.SliderCrankGeometry, coupler_m: float) -> tuple[float, float] | None:
+    """The crank range around theta_fab where the linkage with this coupler closes on one monotone branch (between
+    the two toggle points); None where it does not close at theta_fab. It depends on the geometry alone."""
+    th = np.linspace(g.theta_fab_rad - 1.4, g.theta_fab_rad + 1.4, 2801)
+    s = g.crank_m * np.sin(th) - g.offset_m
+    ok = np.abs(s) < 0.995 * coupler_m
+    dd = tr.ddelta_tra_dtheta(g, coupler_m, np.where(ok, th, g.theta_fab_rad))
+    ok &= dd > 0
+    i0 = int(np.argmin(np.abs(th - g.theta_fab_rad)))
+    if not ok[i0]:
+        return None
+    # the contiguous run of `ok` around i0
+    bad = np.flatnonzero(~ok)
+    lo = int(bad[bad < i0].max()) + 1 if np.any(bad < i0) else 0
+    hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
+    return float(th[lo]), float(th[hi])
 
 
 class Powertrain:
@@ -89,7 +113,16 @@ class Powertrain:
         self._has_flex = bool(np.any(self.kappa != 0) or self.k_swing_coupled != 0)
         self._theta_lo, self._theta_hi = self._operating_range()
         self._grid = np.linspace(self._theta_lo, self._theta_hi, _GRID_POINTS)
-        th_n = self._solve(np.zeros(1), np.zeros(1), g.theta_fab_rad)[0]
+        # Fits build many powertrains that differ only in what the undriven equilibrium does not see (the
+        # actuator's d31, a drive effect), so it is kept by everything it depends on.
+        neutral_key = (g, self.coupler_m, self.k_eff_N_per_m, design.flexure_strip if design.coupler_buckling
+                       else None, tuple(self.kappa.tolist()), self.k_swing_coupled)
+        th_n = _NEUTRAL_CACHE.get(neutral_key)
+        if th_n is None:
+            th_n = self._solve(np.zeros(1), np.zeros(1), g.theta_fab_rad)[0]
+            if len(_NEUTRAL_CACHE) >= _CACHE_SIZE:
+                _NEUTRAL_CACHE.clear()
+            _NEUTRAL_CACHE[neutral_key] = th_n
         if not np.isfinite(th_n):
             raise ModelError(f"design {design.design}: no stable undriven equilibrium with this geometry and bias "
                              f"(bias_m={design.bias_m:.4g})")
@@ -185,20 +218,11 @@ class Powertrain:
     def _operating_range(self) -> tuple[float, float]:
         """Contiguous crank range around theta_fab where the (biased) linkage closes, on one monotone branch."""
         g, c = self.geometry, self.coupler_m
-        th = np.linspace(g.theta_fab_rad - 1.4, g.theta_fab_rad + 1.4, 2801)
-        s = g.crank_m * np.sin(th) - g.offset_m
-        ok = np.abs(s) < 0.995 * c
-        dd = tr.ddelta_tra_dtheta(g, c, np.where(ok, th, g.theta_fab_rad))
-        ok &= dd > 0   # one monotone branch of the slider-crank: between the two toggle points
-        i0 = int(np.argmin(np.abs(th - g.theta_fab_rad)))
-        if not ok[i0]:
+        span = _closing_range(g, c)
+        if span is None:
             raise ModelError(f"design {self.design.design}: transmission geometry cannot close or is at a toggle "
                              f"at theta_fab (coupler_m={c:.6g}, crank_m={g.crank_m:.6g}, offset_m={g.offset_m:.6g})")
-        # the contiguous run of `ok` around i0
-        bad = np.flatnonzero(~ok)
-        lo = int(bad[bad < i0].max()) + 1 if np.any(bad < i0) else 0
-        hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
-        return float(th[lo]), float(th[hi])
+        return span
 
     def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
         """U'(theta) - load h'(theta), one fused pass (same equations as transmission.py, constants cached)."""
