@@ -27,6 +27,7 @@ from hamr_bench.errors import HamrBenchError
 from hamr_bench.model import ActuatorParams, DesignParams, Powertrain, actuator_preset, design_preset
 from hamr_bench.model import actuator as act
 from hamr_bench.model.effects import Effect
+from hamr_bench.recording.steps import INFERRED, INFERRED_RAMP_DT_S
 
 FULL_SCALE_V = 250.0
 # The free foot's height is a smooth function of the half drive alone: tabulated per powertrain and interpolated
@@ -38,6 +39,7 @@ DENSE_DT_S = 1e-3
 MEMO_ARRAYS = 10
 REFERENCE_ACTUATOR = actuator_preset(2, "effective")
 MEMO_ITEMS = 400
+SETTLE_S = 2.5e-4  # a sample reads the staircase averaged over this long before it (the amplifier's settling)
 AT_CACHE = 8  # drives at the sample times kept per run (RunEngine._drive_at)
 
 
@@ -71,6 +73,33 @@ def _zoh(t_cmd: np.ndarray, v_cmd: np.ndarray, t: np.ndarray, before: float = 0.
         return np.full(t.shape, before)
     i = np.searchsorted(t_cmd, t, "right") - 1
     return np.where(i >= 0, v_cmd[np.clip(i, 0, None)], before)
+
+
+def _keep(cache: dict, key: Any, value: Any) -> None:
+    """Add to a small first-in-first-out cache of AT_CACHE entries."""
+    if len(cache) >= AT_CACHE:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
+
+
+class _Staircase:
+    """A command held between its samples (a DAQ's zero-order hold), through its running integral: the mean over
+    any interval is exact wherever the interval falls relative to the steps."""
+
+    def __init__(self, t_cmd: np.ndarray, v_cmd: np.ndarray, before: float = 0.0) -> None:
+        self.t, self.v, self.before = t_cmd, v_cmd, before
+        self._at = np.r_[0.0, np.cumsum(v_cmd[:-1] * np.diff(t_cmd))] if t_cmd.size else np.zeros(0)
+
+    def integral(self, t: np.ndarray) -> np.ndarray:
+        """The integral from the first sample to `t` (the value before it: `before`)."""
+        if self.t.size == 0:
+            return self.before * t
+        i = np.searchsorted(self.t, t, "right") - 1
+        k = np.clip(i, 0, None)
+        return np.where(i >= 0, self._at[k] + self.v[k] * (t - self.t[k]), self.before * (t - self.t[0]))
+
+    def mean(self, start: np.ndarray, width: float) -> np.ndarray:
+        return (self.integral(start + width) - self.integral(start)) / width
 
 
 def base_params(run: Any, fit_params: dict | None = None) -> tuple[ActuatorParams, DesignParams | None]:
@@ -159,12 +188,25 @@ class RunEngine:
         t_first = min(starts)
         t_last = float(t_all.max()) if t_all.size else t_first
         self.dense_t = np.arange(t_first - DENSE_DT_S, t_last + 0.1, DENSE_DT_S)
-        self.dense_vb = _zoh(run.bias_cmd[0], run.bias_cmd[1], self.dense_t)
-        self.dense_vd = _zoh(run.drive_cmd[0], run.drive_cmd[1], self.dense_t)
+        # The drive as played: a staircase at the command's own sample times. The dense grid (for the memory of
+        # hysteresis and creep) holds each cell's mean; a sample's drive is read from the staircase itself (a
+        # staircase step falls anywhere in a cell, and on a fast ramp a cell is several noise widths of force).
+        self._bias = _Staircase(*run.bias_cmd)
+        self._drive = _Staircase(*run.drive_cmd)
+        self.dense_vb = self._bias.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
+        self.dense_vd = self._drive.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
+        self._dense_net = 2.0 * self.dense_vd - self.dense_vb     # bottom plate - top plate, no effect
+        # A sample reads the staircase averaged over [t - settle, t + ahead]. A commanded drive is played as the
+        # staircase: the amplifier settles on each step (SETTLE_S). An inferred drive is a smooth ramp written as a
+        # staircase of INFERRED_RAMP_DT_S steps, each at the ramp's value at its start: averaged over the step
+        # ahead it reads as the ramp again (linear between the steps, no delay).
+        inferred = getattr(run, "timelines", {}).get("drive") == INFERRED
+        self._settle_s, self._ahead_s = (0.0, INFERRED_RAMP_DT_S) if inferred else (SETTLE_S, 0.0)
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
         self._memory: list[np.ndarray] | None = None
         self._at: dict[tuple, np.ndarray] = {}
+        self._played: dict[tuple, np.ndarray] = {}
         self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
@@ -231,14 +273,25 @@ class RunEngine:
     def _drive_at(self, times: str, te: np.ndarray, lags: tuple[float, float], effects: Effects,
                   t_p: float) -> np.ndarray:
         """The effective drive at the lagged sample times `te` of `times` ("t": the rows' samples, "rt": the camera
-        reference's). Kept for the last few (drive, lags): a Jacobian's columns for gains, contact shifts and
-        drift coefficients leave both alone, and the interpolation would be repeated for each."""
+        reference's): the played staircase itself, plus what the drive effects change, read from the dense grid.
+        Both are kept for the last few keys: a Jacobian's columns for gains, contact shifts and drift coefficients
+        leave the lags and the drive alone, and those for the drive effects leave the lags alone."""
         key = (times, lags) + self._drive_key(effects, t_p)
         y = self._at.get(key)
         if y is None:
-            if len(self._at) >= AT_CACHE:
-                self._at.pop(next(iter(self._at)))
-            y = self._at[key] = np.interp(te, self.dense_t, self.effective_drive(effects, t_p))
+            y = self._played_at(times, te, lags)
+            if len(key) > 4:   # drive effects
+                y = y + np.interp(te, self.dense_t, self.effective_drive(effects, t_p) - self._dense_net)
+            _keep(self._at, key, y)
+        return y
+
+    def _played_at(self, times: str, te: np.ndarray, lags: tuple[float, float]) -> np.ndarray:
+        """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times."""
+        y = self._played.get((times, lags))
+        if y is None:
+            start, w = te - self._settle_s, self._settle_s + self._ahead_s
+            y = 2.0 * self._drive.mean(start, w) - self._bias.mean(start, w)
+            _keep(self._played, (times, lags), y)
         return y
 
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:

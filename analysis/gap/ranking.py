@@ -16,7 +16,7 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import AddEach, add_each_here, n_params, overdispersion
+from analysis.gap.screening import AddEach, add_each_here, grid_best, n_params, overdispersion, threshold
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -47,10 +47,12 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     pool = [s.name for s in sorted(screened, key=lambda s: -s.improvement) if s.promising]
     current = nominal
     rejected: list[StepCandidate] = []
+    spent: set[str] = set()   # named, alone or in an ambiguous set
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if judge.heldout(current).ci95[0] <= 1.0:
             break   # at the noise floor
-        names = pool[:MAX_TRIED]
+        again = _looked_again(p, current, screened, set(pool) | spent) if current is not nominal else []
+        names = pool[:MAX_TRIED] + again
         reuse = {n: screen_fits[n] for n in names if current is nominal and screen_fits and n in screen_fits
                  and screen_fits[n].extra.get("converged")}
         fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40)
@@ -74,7 +76,23 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         fits.append(current)
         alternatives.append(tried)
         pool = [n for n in pool if n != lead.name and n not in ambiguous]
+        spent |= {lead.name, *ambiguous}
     return Selection(steps, fits, alternatives, rejected)
+
+
+def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: set[str]) -> list[str]:
+    """Candidates the screening against the nominal fit turned down whose best strength on the coarse grid lowers
+    the current fit's objective by more than the screening threshold: a large effect named first can hide a smaller
+    one from a fit started at the nominal model (its fit stopped short of the nominal objective itself)."""
+    scale2 = overdispersion(p, current, 0)
+    out = []
+    for s in screened:
+        if s.promising or s.name in exclude or FAMILIES[s.name].kind == "baseline":
+            continue
+        objective, _ = grid_best(p, current, s.name)
+        if current.objective - objective > threshold(p, s.name, scale2, len(screened)):
+            out.append(s.name)
+    return out
 
 
 def _lead(rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge) -> StepCandidate:

@@ -20,12 +20,18 @@ SCREEN_ALPHA = 0.01
 def grid_start(p: Problem, base: Fit, name: str) -> dict[tuple, float]:
     """Start values for adding `name` to `base`: base's parameters and the best strength on a coarse grid (the
     landscape of a memory or contact effect is not convex from 0)."""
+    return grid_best(p, base, name)[1]
+
+
+def grid_best(p: Problem, base: Fit, name: str) -> tuple[float, dict[tuple, float]]:
+    """(objective, start values) at the best strength of `name` on the coarse grid, everything else held at
+    `base`'s values (a baseline family: base's objective and values)."""
     names = tuple(base.names) + (name,)
     lay = p.layout(names)
     start = dict(base.values())
     f = FAMILIES[name]
     if f.kind == "baseline":
-        return start
+        return base.objective, start
     lo, hi = f.bounds
     grid = [s * f.scale for s in (-4, -2, -1, -0.5, 0.5, 1, 2, 4, 8)]
     grid = [min(max(g, lo), hi) for g in grid if lo <= g <= hi or (lo < g and hi == math.inf)]
@@ -37,7 +43,7 @@ def grid_start(p: Problem, base: Fit, name: str) -> dict[tuple, float]:
         if c < best:
             best, best_s = c, s
     start[("strength", name)] = best_s
-    return start
+    return best, start
 
 
 def n_params(p: Problem, name: str) -> int:
