@@ -35,15 +35,21 @@ def grid_best(p: Problem, base: Fit, name: str) -> tuple[float, dict[tuple, floa
     lo, hi = f.bounds
     grid = [s * f.scale for s in (-4, -2, -1, -0.5, 0.5, 1, 2, 4, 8)]
     grid = [min(max(g, lo), hi) for g in grid if lo <= g <= hi or (lo < g and hi == math.inf)]
-    best, best_s = math.inf, 0.0
-    for s in sorted(set(grid)):
-        x = lay.vector({**start, ("strength", name): s})
-        r = p.residual(lay, x)
-        c = float(r @ r)
-        if c < best:
-            best, best_s = c, s
-    start[("strength", name)] = best_s
-    return best, start
+    # A drive effect and a sensor chain's lag trade on a ramp (a lag fitted without the effect stands in for a
+    # loop): each strength is also tried with each fixture's lags at zero, and the best start kept.
+    starts = [start]
+    if f.kind == "drive":
+        for fixture in sorted({k[1] for k in start if k[0] == "lag"}):
+            starts.append({**start, **{k: 0.0 for k in start if k[0] == "lag" and k[1] == fixture}})
+    best, best_start = math.inf, start
+    for s0 in starts:
+        for s in sorted(set(grid)):
+            x = lay.vector({**s0, ("strength", name): s})
+            r = p.residual(lay, x)
+            c = float(r @ r)
+            if c < best:
+                best, best_start = c, {**s0, ("strength", name): s}
+    return best, best_start
 
 
 def n_params(p: Problem, name: str) -> int:
