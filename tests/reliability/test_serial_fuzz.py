@@ -114,7 +114,10 @@ VALID_OPEN = {"di1000": [b"A\r\n", b"A\r\n", b"LB\r\n", b"10.000\r\n"],
 OPENED = {"count": 0}
 
 
-@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# derandomized: the examples are the same on every run and every machine, so the count the next test checks is
+# too (with random examples and no example database, as in a fresh clone, it came out 9 once)
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True,
+          database=None)
 @given(data=st.data(), command_set=st.sampled_from(["di1000", "iload"]))
 def test_loadstar_replies_and_stream_of_random_bytes_raise_only_device_errors(data, command_set):
     clock = VirtualClock()
@@ -144,4 +147,4 @@ def test_loadstar_replies_and_stream_of_random_bytes_raise_only_device_errors(da
 
 def test_the_fuzzed_loadstar_opened_often_enough_to_reach_the_read_parsers():
     # runs after the property above (file order): its examples with a valid opening got past open()
-    assert OPENED["count"] >= 10
+    assert OPENED["count"] >= 10, OPENED
