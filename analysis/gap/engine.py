@@ -6,7 +6,9 @@ The drive path, on a uniform grid of DENSE_DT_S:
 
     plate voltages V_drive, V_bias - V_drive -> each plate's hysteresis -> x its d31(E) gain -> net drive -> creep
 
-then the quasi-static model at the sensor's sample times (minus the sensor chain's lag): the bare actuator's
+read at the sensor's sample times (minus the sensor chain's lag) as the drive was played: the command's
+staircase itself (`_Staircase`, averaged over the amplifier's settling, or over one step ahead for an inferred
+drive), plus what the drive effects change on the grid. Then the quasi-static model: the bare actuator's
 closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at 0 for a
 sensor that reads only push) or the powertrain (leg). The force baseline (drift) is added linearly by `Problem`.
 Strength 0 of every candidate is the nominal model exactly (the same path, the operators skipped)."""
@@ -280,7 +282,7 @@ class RunEngine:
         y = self._at.get(key)
         if y is None:
             y = self._played_at(times, te, lags)
-            if len(key) > 4:   # drive effects
+            if any(FAMILIES[n].kind == "drive" for n in effects):
                 y = y + np.interp(te, self.dense_t, self.effective_drive(effects, t_p) - self._dense_net)
             _keep(self._at, key, y)
         return y
