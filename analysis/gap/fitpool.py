@@ -1,27 +1,32 @@
 """Candidate fits side by side: screening fits every candidate alone on the nominal fit, and each selection step
 fits every promising candidate on the effects named so far; those fits are independent of each other, so with
-`jobs` > 1 they run in worker processes. The workers are forked once the problem is built and inherit it (nothing
-large is sent to them); each returns its `Fit`. The fits are the same numbers as in one process (a fit depends on
-its start and the data only), so the diagnosis does not depend on `jobs`. Where fork is not available (Windows,
-macOS by default) the fits run in this process."""
+`jobs` > 1 they run in worker processes (each on one BLAS thread), the slowest first. The workers are forked once
+the problem is built and inherit it (nothing large is sent to them); each returns its `Fit`. The fits are the same
+numbers as in one process (a fit depends on its start and the data only), so the diagnosis does not depend on
+`jobs`. Where fork is not available (Windows, macOS by default) the fits run in this process."""
 
 from __future__ import annotations
 
+import math
 import multiprocessing
+import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.screening import add_each_here
+from analysis.parallel import one_blas_thread
 
 _PROBLEM: Problem | None = None      # the problem a forked worker inherited
 
 
-def _add_one(task: tuple[Fit, str, int]) -> Fit:
+def _add_one(task: tuple[Fit, str, int]) -> tuple[Fit, float]:
     base, name, max_nfev = task
     assert _PROBLEM is not None  # set before the workers were forked
-    return add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
+    t0 = time.perf_counter()
+    fit = add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
+    return fit, time.perf_counter() - t0
 
 
 class FitPool:
@@ -30,15 +35,22 @@ class FitPool:
     def __init__(self, p: Problem, jobs: int = 1) -> None:
         self.p = p
         self._pool: Any = None
+        self._took: dict[str, float] = {}     # candidate -> how long its last fit took (s)
         if jobs > 1 and "fork" in multiprocessing.get_all_start_methods():
             global _PROBLEM
             _PROBLEM = p
-            self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"))
+            self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"),
+                                             initializer=one_blas_thread)
 
     def add_each(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
         if self._pool is None or len(names) < 2:
             return add_each_here(self.p)(base, names, max_nfev)
-        return dict(zip(names, self._pool.map(_add_one, [(base, n, max_nfev) for n in names]), strict=True))
+        # longest first (by what each candidate's last fit took; a new one counts as longest): the step waits for
+        # its slowest fit, so that one should not start last
+        order = sorted(names, key=lambda n: -self._took.get(n, math.inf))
+        done = dict(zip(order, self._pool.map(_add_one, [(base, n, max_nfev) for n in order]), strict=True))
+        self._took.update({n: took for n, (_, took) in done.items()})
+        return {n: done[n][0] for n in names}
 
     def close(self) -> None:
         global _PROBLEM

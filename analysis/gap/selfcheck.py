@@ -233,7 +233,9 @@ def _run_trials(args: list[tuple[int, float, float, int]], jobs: int, scheduler:
         # as each ends, not in order: a long run shows progress and its raw file keeps what finished
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        from analysis.parallel import one_blas_thread
+
+        with ProcessPoolExecutor(max_workers=jobs, initializer=one_blas_thread) as pool:
             for future in as_completed([pool.submit(_trial_worker, a) for a in args]):
                 take(future.result())
     else:

@@ -18,14 +18,15 @@ from tests.analysis.lab_traces import Effects, Lab, LabFile, Specimen, specimen_
 SPECIMENS = (Specimen("A", 1.02, 0.99), Specimen("B", 0.97, 1.01), Specimen("C", 1.0, 1.0))
 
 
-def write_lab(directory, effects: Effects, seed: int, volts=(120.0, 250.0), lab: Lab | None = None) -> list:
+def write_lab(directory, effects: Effects, seed: int, volts=(120.0, 250.0), lab: Lab | None = None,
+              specimens: tuple[Specimen, ...] = SPECIMENS) -> list:
     lab = lab or Lab()
     rng = np.random.default_rng(seed)
     out = []
     for test in ("blocked", "free"):
         for v in volts:
             f = LabFile()
-            for sp in SPECIMENS:
+            for sp in specimens:
                 f.rows += specimen_rows(sp, 2, test, v, lab, effects, rng)
             csv_path = directory / f"{test}_{int(v)}V.csv"
             f.write(csv_path)
