@@ -29,7 +29,9 @@ from analysis.gap.features import GapData
 
 LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
-GAIN_BOUND = 1.0          # |log gain| (a factor e): far beyond any tolerance, a bound for the solver only
+# |log gain| (a factor e): beyond any tolerance, a bound for the solver only; Table I's reported values reach it
+# (docs/gap.md, Worked example: why it was not widened)
+GAIN_BOUND = 1.0
 NAN_RESIDUAL = 1e3        # a row the model cannot evaluate (beyond the linkage's reach)
 RUN_MODEL_CACHE = 64      # predictions kept per run (least recently used dropped): a Jacobian's steps
 DRIFT_RIDGE_N = 2e-3      # prior scale of the baseline coefficients (N): a sensor baseline wanders by mN, not by the

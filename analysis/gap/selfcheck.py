@@ -141,6 +141,10 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "multi_effects_named": frac(sum(n in t.named and t.named[n] in ("attributed", "ambiguous")
                                         for t, n in multi_pairs), len(multi_pairs)),
         "multi_effect_count": len(multi_pairs),
+        # the looser reading: a hidden effect inside a set the diagnosis names as one it cannot separate
+        "multi_effects_named_or_in_set": frac(sum((n in t.named and t.named[n] in ("attributed", "ambiguous"))
+                                                  or _in_ambiguous_set(t, n) for t, n in multi_pairs),
+                                              len(multi_pairs)),
         "false_attribution_rate_null": frac(sum(bool(_attributed(t)) for t in nulls), len(nulls)),
         "decoys_unexplained": frac(sum(not _attributed(t) for t in decoy_only), len(decoy_only)),
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),
