@@ -32,6 +32,7 @@ SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 # |log gain| (a factor e): beyond any tolerance, a bound for the solver only; Table I's reported values reach it
 # (docs/gap.md, Worked example: why it was not widened)
 GAIN_BOUND = 1.0
+COVARIANCE_RCOND = 1e-10  # singular values of the Jacobian below this share of the largest: undetermined
 NAN_RESIDUAL = 1e3        # a row the model cannot evaluate (beyond the linkage's reach)
 RUN_MODEL_CACHE = 64      # predictions kept per run (least recently used dropped): a Jacobian's steps
 DRIFT_RIDGE_N = 2e-3      # prior scale of the baseline coefficients (N): a sensor baseline wanders by mN, not by the
@@ -104,6 +105,18 @@ class Fit:
 
     def values(self) -> dict[tuple, float]:
         return self.layout.values(self.x)
+
+    def covariance(self) -> np.ndarray:
+        """(J^T J)^+ (unit noise), from the singular values of J itself. Forming J^T J squares J's condition
+        number, and a direction only the tolerance prior pins (a fabrication shift against the specimens' gains,
+        whose data columns are 10^4 times larger) then fell below the pseudo-inverse's cut: its variance came
+        out 0 and a shift's interval 0.1 % wide. Directions below 1e-10 of the largest singular value are
+        dropped, as in the held-out steps."""
+        if "covariance" not in self.extra:
+            _, sv, vt = np.linalg.svd(self.jac, full_matrices=False)
+            keep = sv > COVARIANCE_RCOND * (sv[0] if sv.size else 0.0)
+            self.extra["covariance"] = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+        return self.extra["covariance"]
 
 
 class Problem:

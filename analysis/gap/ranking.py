@@ -123,8 +123,7 @@ def strength_estimate(p: Problem, fit: Fit, name: str, judge: Judge) -> tuple[fl
     derived from its baseline coefficients (`_drift_estimate`)."""
     f = FAMILIES[name]
     scale2 = overdispersion(p, fit)
-    jtj = fit.jac.T @ fit.jac
-    cov = np.linalg.pinv(jtj) * scale2
+    cov = fit.covariance() * scale2
     if f.kind == "baseline":
         return _drift_estimate(p, fit, cov, fit.drift_strength)
     i = fit.layout.index[("strength", name)]

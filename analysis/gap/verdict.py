@@ -63,7 +63,7 @@ def lag_ambiguity(p: Problem, fit: Fit, name: str) -> float:
     """Largest |correlation| between the effect's strength and a sensor chain's lag in the joint fit."""
     if ("strength", name) not in fit.layout.index:
         return 0.0
-    cov = np.linalg.pinv(fit.jac.T @ fit.jac)
+    cov = fit.covariance()
     i = fit.layout.index[("strength", name)]
     out = 0.0
     for j, q in enumerate(fit.layout.params):
