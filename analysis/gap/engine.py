@@ -296,6 +296,14 @@ class RunEngine:
             _keep(self._played, (times, lags), y)
         return y
 
+    def _plate_loops(self, strength: float, gamma: float, tip: float) -> np.ndarray:
+        """Each plate's voltage through its hysteresis on the dense grid (shape (2, n), V)."""
+        w = op.plate_weights(strength, gamma, tip)
+        memory = self._plate_memory()
+        vd, vt = self.dense_vd, self.dense_vb - self.dense_vd
+        return FULL_SCALE_V * np.stack([op.plate_hysteresis(vd / FULL_SCALE_V, memory[0], w, tip),
+                                        op.plate_hysteresis(vt / FULL_SCALE_V, memory[1], w, tip)])
+
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """Per plate: its voltage, through its hysteresis (the switching thresholds are fields: the plate's own
         voltage, not a d31-scaled one, so a plate's memory is computed once), times its d31(E) gain; the net drive
@@ -309,11 +317,10 @@ class RunEngine:
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
             tip = hy.shape("tip_share", "hysteresis")
-            h_key = (hy.strength, gamma, tip)
-            w = op.plate_weights(hy.strength, gamma, tip)
-            memory = self._plate_memory()
-            plates = FULL_SCALE_V * np.stack([op.plate_hysteresis(vd / FULL_SCALE_V, memory[0], w, tip),
-                                              op.plate_hysteresis(vt / FULL_SCALE_V, memory[1], w, tip)])
+            loops = (hy.strength, gamma, tip)
+            h_key = loops
+            # kept apart from the net drive: a Jacobian's d31 and creep columns change the drive, not the loops
+            plates = self._memo(("hysteresis",) + loops, lambda: self._plate_loops(*loops))
         d_key = None
         if d31 is not None and d31.strength != 0:
             d_key = (d31.strength, d31.shape("curvature", "field_dependent_d31"), t_p)

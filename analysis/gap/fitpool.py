@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from analysis.gap.problem import Fit, Problem
-from analysis.gap.screening import add_each_here
+from analysis.gap.screening import add_each_here, grid_objectives_here
 from analysis.parallel import one_blas_thread
 
 _PROBLEM: Problem | None = None      # the problem a forked worker inherited
@@ -27,6 +27,12 @@ def _add_one(task: tuple[Fit, str, int]) -> tuple[Fit, float]:
     t0 = time.perf_counter()
     fit = add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
     return fit, time.perf_counter() - t0
+
+
+def _grid_one(task: tuple[Fit, str]) -> float:
+    base, name = task
+    assert _PROBLEM is not None  # set before the workers were forked
+    return grid_objectives_here(_PROBLEM)(base, [name])[name]
 
 
 class FitPool:
@@ -51,6 +57,12 @@ class FitPool:
         done = dict(zip(order, self._pool.map(_add_one, [(base, n, max_nfev) for n in order]), strict=True))
         self._took.update({n: took for n, (_, took) in done.items()})
         return {n: done[n][0] for n in names}
+
+    def grid_objectives(self, base: Fit, names: Sequence[str]) -> dict[str, float]:
+        """Each candidate's best objective on its coarse grid added to `base` (`screening.grid_best`)."""
+        if self._pool is None or len(names) < 2:
+            return grid_objectives_here(self.p)(base, names)
+        return dict(zip(names, self._pool.map(_grid_one, [(base, n) for n in names]), strict=True))
 
     def close(self) -> None:
         global _PROBLEM

@@ -16,7 +16,8 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import AddEach, add_each_here, grid_best, n_params, overdispersion, threshold
+from analysis.gap.screening import (AddEach, GridObjectives, add_each_here, grid_objectives_here, n_params,
+                                    overdispersion, threshold)
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -37,9 +38,11 @@ def _closed(before: float, after: float) -> float:
 
 
 def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool,
-           add_each: AddEach | None = None, screen_fits: dict[str, Fit] | None = None) -> Selection:
+           add_each: AddEach | None = None, screen_fits: dict[str, Fit] | None = None,
+           grid_objectives: GridObjectives | None = None) -> Selection:
     """`screen_fits`: the screening's fits (nominal + one candidate); at the first step a converged one is that
-    step's fit of its candidate (the same problem), not fitted again."""
+    step's fit of its candidate (the same problem), not fitted again. `add_each` and `grid_objectives`: where the
+    candidates' fits and coarse grids run (`fitpool.FitPool`: side by side)."""
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
@@ -51,7 +54,8 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if judge.heldout(current).ci95[0] <= 1.0:
             break   # at the noise floor
-        again = _looked_again(p, current, screened, set(pool) | spent) if current is not nominal else []
+        again = _looked_again(p, current, screened, set(pool) | spent, grid_objectives) \
+            if current is not nominal else []
         names = pool[:MAX_TRIED] + again
         reuse = {n: screen_fits[n] for n in names if current is nominal and screen_fits and n in screen_fits
                  and screen_fits[n].extra.get("converged")}
@@ -80,19 +84,16 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     return Selection(steps, fits, alternatives, rejected)
 
 
-def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: set[str]) -> list[str]:
+def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: set[str],
+                  grid_objectives: GridObjectives | None = None) -> list[str]:
     """Candidates the screening against the nominal fit turned down whose best strength on the coarse grid lowers
     the current fit's objective by more than the screening threshold: a large effect named first can hide a smaller
     one from a fit started at the nominal model (its fit stopped short of the nominal objective itself)."""
     scale2 = overdispersion(p, current, 0)
-    out = []
-    for s in screened:
-        if s.promising or s.name in exclude or FAMILIES[s.name].kind == "baseline":
-            continue
-        objective, _ = grid_best(p, current, s.name)
-        if current.objective - objective > threshold(p, s.name, scale2, len(screened)):
-            out.append(s.name)
-    return out
+    names = [s.name for s in screened
+             if not (s.promising or s.name in exclude or FAMILIES[s.name].kind == "baseline")]
+    objective = (grid_objectives or grid_objectives_here(p))(current, names)
+    return [n for n in names if current.objective - objective[n] > threshold(p, n, scale2, len(screened))]
 
 
 def _lead(rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge) -> StepCandidate:

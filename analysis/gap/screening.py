@@ -118,6 +118,14 @@ def threshold(p: Problem, name: str, scale2: float, n_candidates: int) -> float:
 
 
 AddEach = Callable[[Fit, Sequence[str], int], dict[str, Fit]]
+GridObjectives = Callable[[Fit, Sequence[str]], dict[str, float]]
+
+
+def grid_objectives_here(p: Problem) -> GridObjectives:
+    """Each candidate's best objective on its coarse grid added to a fit (`grid_best`), in this process."""
+    def objectives(base: Fit, names: Sequence[str]) -> dict[str, float]:
+        return {n: grid_best(p, base, n)[0] for n in names}
+    return objectives
 
 
 def add_each_here(p: Problem) -> AddEach:
