@@ -1,6 +1,7 @@
 """A fabrication shift common to every specimen: the population test sees it where no single specimen is beyond
 its tolerances, and a shift's (or a series spring's) fit starts where the specimens' gains hand it what they had
-absorbed, so the rows are as they were and only the tolerance prior changes."""
+absorbed, so the rows are as they were and only the tolerance prior changes; and its interval keeps the variance
+that only the prior pins."""
 
 from types import SimpleNamespace
 
@@ -82,3 +83,14 @@ def test_a_width_loss_is_started_at_what_the_gains_absorbed(narrow_lab):
     assert 0.1 < s < 0.35
     assert start[("strength", "width_loss")] == pytest.approx(s)
     assert nom.objective - objective > 10.0
+
+
+def test_a_direction_only_the_prior_pins_keeps_its_variance():
+    # two parameters whose data columns are 1e8 and equal (they trade exactly on the rows, as a shift and the
+    # gains do) and a prior row of 1 on the second: (J^T J)^-1 is [[1 + 2e-17, -1], [-1, 1]] exactly, but J^T J's
+    # condition number is ~1e17 and a pseudo-inverse of it drops the weak direction (variance ~0)
+    from analysis.gap.problem import Fit
+
+    rows = np.array([[1e8, 1e8], [2e8, 2e8], [0.0, 1.0]])
+    fit = Fit((), None, np.zeros(2), np.zeros(3), rows, {})  # type: ignore[arg-type]
+    assert np.allclose(fit.covariance(), [[1.0, -1.0], [-1.0, 1.0]], rtol=1e-6)
