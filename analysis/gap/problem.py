@@ -138,10 +138,11 @@ class Problem:
         self.chains = sorted({self.chain_of(e, q) for e in self.engines for q in self._quantities(e)})
         # per specimen group: maps its two log gains (stroke, stiffness) to independent unit-variance scores
         # under the tolerance prior
-        self.group_actuator = {g: next(e.actuator for e in self.engines if self.group_of(e) == g) for g in self.groups}
-        self.gain_whitening = {g: tol.whitening(self.group_actuator[g]) for g in self.groups}
+        # a run of each specimen group: its actuator (the group's presets) and layer count
+        self.group_engine = {g: next(e for e in self.engines if self.group_of(e) == g) for g in self.groups}
+        self.gain_whitening = {g: tol.whitening(e.actuator) for g, e in self.group_engine.items()}
         # specimens of one actuator type (layer count) share a batch: a fabrication shift moves them together
-        self.group_type = {g: next(e.run.layers for e in self.engines if self.group_of(e) == g) for g in self.groups}
+        self.group_type = {g: e.run.layers for g, e in self.group_engine.items()}
         self._cache: list[OrderedDict] = [OrderedDict() for _ in self.engines]
         self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
         self.ramp_rates = self._ramp_rates()
@@ -417,7 +418,6 @@ class Problem:
                           ftol=1e-6, xtol=1e-6)
         fit = self._fit(lay, r.x, r.fun, r.jac)
         fit.extra["converged"] = bool(r.status > 0)    # a tolerance met, not stopped by max_nfev
-        fit.extra["evaluations"] = (int(r.nfev), int(r.njev or 0))
         return fit
 
     def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:

@@ -67,9 +67,8 @@ def gain_change(p: Problem, base: Fit, g: str, name: str, s: float) -> np.ndarra
     coordinates of its gains, so gains minus this leave the rows as they were. Exact for a fabrication shift; for
     a series spring (its shapes at their defaults: linear, the same both ways) the stiffness the actuator must gain
     to keep its blocked force, k / (1 + C k) as before."""
-    e = next(e for e in p.engines if p.group_of(e) == g)
     gains = (base.value("gain", g, 0), base.value("gain", g, 1))
-    a = e.actuator_for(base.effects, gains)
+    a = p.group_engine[g].actuator_for(base.effects, gains)
     if FAMILIES[name].kind == "params":
         return tol.log_outputs(tol.scaled(a, name, s)) - tol.log_outputs(a)
     c = base_compliance_m_per_N(s, 1.0) if name == "base_compliance" else s
@@ -78,6 +77,7 @@ def gain_change(p: Problem, base: Fit, g: str, name: str, s: float) -> np.ndarra
 
 
 def compensated(p: Problem, base: Fit, name: str, s: float) -> dict[tuple, float]:
+    """`base`'s values with `name` at strength s and every specimen's gains moved by what it changes."""
     out = {**base.values(), ("strength", name): s}
     for g in p.groups:
         d = gain_change(p, base, g, name, s)
