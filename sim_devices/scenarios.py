@@ -55,7 +55,7 @@ DECOY_EFFECTS = tuple(n for n, s in EFFECTS.items() if s.kind == "decoy")
 # the leg fixture alone shows these: an actuator-only trial set cannot see them
 LEG_ONLY = ("bias_error", "foot_friction", "flexure_softening")
 # effects whose strength unit is the library candidate's unit (same physical quantity; forms.md)
-SAME_UNIT = ("hysteresis", "creep", "base_compliance", "grounding_lengthening", "sensor_compliance", "width_loss",
+SAME_UNIT = ("hysteresis", "base_compliance", "grounding_lengthening", "sensor_compliance", "width_loss",
              "pzt_thickness", "pzt_modulus", "bias_error", "stage_backlash", "sensor_drift")
 
 
@@ -227,8 +227,26 @@ def _effect(name: str, rng: np.random.Generator, layers: int) -> EffectTruth:
             continue
         decoy = EFFECTS[name].kind == "decoy"
         return EffectTruth(name, strength, shape, decoy, None if decoy else name,
-                           strength if name in SAME_UNIT else None, observable)
+                           library_strength(name, strength, shape), observable)
     raise RuntimeError(f"no realisable shape drawn for {name}")
+
+
+# The creep candidate's unit (analysis.gap.families): mean growth per decade over these times, as a fraction of
+# the response at 1 s. A unit, not a form: the generator's own creep is converted into it below.
+LIBRARY_CREEP_SPAN_S = (0.05, 0.4)
+
+
+def library_strength(name: str, strength: float, shape: dict[str, float]) -> float | None:
+    """The effect's size in its library candidate's unit, where the two measure the same quantity (None
+    otherwise). Creep is drawn as growth per decade over 10 ms - 100 s, but the candidate's unit spans the ages
+    the actuator protocol's dwell observes (50 - 400 ms): the generator's own step response is read there."""
+    if name == "creep":
+        from sim_devices.drive_chain import PronyCreep, creep_shape
+
+        t0, t1 = LIBRARY_CREEP_SPAN_S
+        early, late, at_1s = PronyCreep(strength, **creep_shape(shape)).step_response(np.array([t0, t1, 1.0]))
+        return float((late - early) / at_1s / math.log10(t1 / t0))
+    return strength if name in SAME_UNIT else None
 
 
 # ------------------------------------------------------------------ observables comparable across forms

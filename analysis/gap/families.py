@@ -7,7 +7,7 @@ pairs side by side):
 | hysteresis | per plate, a weighted sum of plays on the unipolar range (threshold density ~ r^gamma), read |
 |   | back through its first rise (tip share c mixes in the unmapped sum) | largest loop gap / span, full drive |
 | creep | power-law (Nutting) superposition of every drive increment, exponent n of either sign; log law at 0 |
-|   | | mean growth per decade, 10 ms - 100 s |
+|   | | growth per decade, 50 - 400 ms       |
 | field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(250 V) / d31(100 V) - 1 |
 | base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
 | sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
@@ -57,7 +57,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            "plays on each plate's unipolar range (threshold density ~ r^gamma), tips on the first rise", "drive",
            {"density_exponent": Shape(0.0, -0.8, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
            scale=0.05),
-    Family("creep", "mean growth per decade of time over 10 ms - 100 s (fraction of a step)", (0.0, 0.12),
+    Family("creep", "growth from 50 to 400 ms after a step, per decade (fraction of the step)", (0.0, 0.12),
            "power-law superposition of drive increments (log law at n = 0)", "drive",
            {"exponent": Shape(0.0, -0.8, 0.6, 0.3)}, scale=0.01),
     Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),

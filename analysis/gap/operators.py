@@ -154,21 +154,27 @@ def slope_after_reversal(weights: np.ndarray) -> float:
 
 # ------------------------------------------------------------------ creep: power law (log law at n -> 0)
 CREEP_TAU0_S = 1e-3                # regularises the kernel at the step itself
-CREEP_SPAN_DECADES = (-2.0, 2.0)   # the strength is the mean growth per decade over 10 ms - 100 s
+# The strength is the growth per decade from 50 ms to 400 ms after a drive increment: the ages a step reaches
+# within the actuator protocol's dwell (its default ramp 50 ms, dwell 0.4 s), the only ones the data see directly.
+# Outside them the power law extrapolates: creep faster than a ramp reads as a gain, slower as a tilt of the run.
+CREEP_SPAN_DECADES = (math.log10(0.05), math.log10(0.4))
 
 
 def creep_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
     """phi_n(tau) = ((tau + tau0)^n - 1) / (n ln 10) / m_n (tau in s), log10(tau + tau0) at n = 0: zero at 1 s,
-    growing by 1 per decade on average over 10 ms - 100 s (m_n: the mean of the slope (tau)^n per decade there).
+    growing by 1 per decade on average over 50 - 400 ms (m_n: the mean of the slope (tau)^n per decade there).
     A step grows as 1 + g phi_n(t - t_step): low early, on nominal at 1 s, still creeping after (Nutting's power
     law; the log law is its n -> 0 limit). n > 0: the growth per decade rises with time; n < 0: it falls, and the
     creep saturates (most of it early)."""
     t = np.asarray(tau_s, float) + CREEP_TAU0_S
-    if abs(exponent) < 1e-6:
+    if exponent == 0.0:
         return np.log10(t)
+    # expm1 keeps both ratios exact as n -> 0, so the kernel is smooth through the log law: a solver's
+    # finite-difference step in n (scipy takes ~1.5e-8 at n = 0) must see the kernel change, or n never leaves 0
+    ln10 = math.log(10.0)
     a, b = CREEP_SPAN_DECADES
-    mean_slope = (10.0 ** (exponent * b) - 10.0 ** (exponent * a)) / (exponent * math.log(10.0) * (b - a))
-    return (t ** exponent - 1.0) / (exponent * math.log(10.0)) / mean_slope
+    mean_slope = (math.expm1(exponent * b * ln10) - math.expm1(exponent * a * ln10)) / (exponent * ln10 * (b - a))
+    return np.expm1(exponent * np.log(t)) / (exponent * ln10) / mean_slope
 
 
 def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:

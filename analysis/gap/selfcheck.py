@@ -157,14 +157,18 @@ def score(trials: list[Trial]) -> dict[str, Any]:
 DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - GAP_ALPHA, 2)))
 
 
-def shift_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-                 specimens: int = TRIAL_SPECIMENS) -> dict[str, float]:
-    """For each fabrication shift a trial hides, how far it moves the mean of its specimens' gains, in units of
-    the tolerance prior's spread of that mean (sqrt(n) x the Mahalanobis length of the shift's (log stroke,
-    log stiffness) change): the best any method that allows the tolerances can do. Below `DETECTION_SIGMAS` a
-    shift common to every specimen looks like specimen scatter. Recomputed from the trial's seed (no
-    simulation), so a raw file of an earlier run can be scored too."""
+def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
+                specimens: int = TRIAL_SPECIMENS) -> dict[str, float]:
+    """For each hidden effect that acts on a trial's actuators as a change of their common gains (a fabrication
+    shift; a series spring, to first order), how far it moves the mean of its specimens' gains in units of the
+    tolerance prior's spread of that mean (sqrt(n) x the Mahalanobis length of the (log stroke, log stiffness)
+    change): the best any method that allows the tolerances can do. Below `DETECTION_SIGMAS` such an effect
+    looks like specimen scatter. A spring's change is its blocked-force loss at 250 V (free stroke unchanged);
+    a hardening spring's loss differs across voltages, which a method could still see: for springs the limit is
+    that of the linear part. Recomputed from the trial's seed (no simulation), so a raw file of an earlier run
+    can be scored too."""
     from analysis.gap import tolerances as tol
+    from hamr_bench.model import actuator as act
     from hamr_bench.model import actuator_preset
     from sim_devices.scenarios import draw_scenario
 
@@ -176,30 +180,46 @@ def shift_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float =
     for e in sc.effects:
         if e.decoy or not e.library_name or e.library_strength is None:
             continue
-        try:
-            shifted = tol.scaled(a, e.library_name, float(e.library_strength))
-        except KeyError:        # not a fabrication shift
-            continue
-        g = tol.log_outputs(shifted) - tol.log_outputs(a)
+        if e.library_name == "sensor_compliance":
+            ck = float(e.library_strength) * act.stiffness_N_per_m(a)
+            g = np.array([0.0, math.log(1.0 / (1.0 + ck))])
+        elif e.library_name == "base_compliance":
+            g = np.array([0.0, math.log(1.0 - e.observable["blocked_force_loss_250V"])])
+        else:
+            try:
+                shifted = tol.scaled(a, e.library_name, float(e.library_strength))
+            except KeyError:        # neither a fabrication shift nor a spring
+                continue
+            g = tol.log_outputs(shifted) - tol.log_outputs(a)
         out[e.library_name] = float(math.sqrt(len(sc.specimens)) * np.linalg.norm(w @ g))
     return out
 
 
 def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, decoy_fraction: float = 0.1,
                             specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
-    """Top-1 on single-effect trials split by kind: fabrication shifts above and below their detection limit
-    (`shift_sigmas`), and every other effect. The fractions and specimens must be the run's (they set the
-    draw)."""
-    rows: dict[str, list[int]] = {"shift_above_limit": [0, 0], "shift_below_limit": [0, 0], "other": [0, 0]}
+    """The single- and multi-effect scores split by kind of hidden effect: effects on the specimens' common gains
+    (shifts and springs) above and below their detection limit (`gain_sigmas`), and every other effect. Single:
+    top-1, and how often the truth was inside a set the diagnosis named as one it cannot separate; multi: each
+    hidden effect named (attributed or ambiguous) or inside a named set. The fractions and specimens must be the
+    run's (they set the draw)."""
+    kinds = ("gain_above_limit", "gain_below_limit", "other")
+    single = {k: [0, 0, 0] for k in kinds}
+    multi = {k: [0, 0, 0] for k in kinds}
     for t in trials:
-        if t.kind != "single":
+        if t.kind not in ("single", "multi"):
             continue
-        sig = shift_sigmas(t.seed, null_fraction, decoy_fraction, specimens).get(t.truth[0])
-        key = "other" if sig is None else ("shift_above_limit" if sig >= DETECTION_SIGMAS else "shift_below_limit")
-        rows[key][0] += t.best == t.truth[0]
-        rows[key][1] += 1
-    return {"detection_sigmas": DETECTION_SIGMAS, "top1_single": {k: {"right": v[0], "of": v[1]}
-                                                                  for k, v in rows.items()}}
+        sigmas = gain_sigmas(t.seed, null_fraction, decoy_fraction, specimens)
+        for n in t.truth[:1] if t.kind == "single" else t.truth:
+            sig = sigmas.get(n)
+            key = "other" if sig is None else ("gain_above_limit" if sig >= DETECTION_SIGMAS else "gain_below_limit")
+            named = n in t.named and t.named[n] in ("attributed", "ambiguous")
+            row = single[key] if t.kind == "single" else multi[key]
+            row[0] += t.best == n if t.kind == "single" else named
+            row[1] += (t.best is None if t.kind == "single" else not named) and _in_ambiguous_set(t, n)
+            row[2] += 1
+    return {"detection_sigmas": DETECTION_SIGMAS,
+            "top1_single": {k: {"right": v[0], "in_set": v[1], "of": v[2]} for k, v in single.items()},
+            "multi_named": {k: {"named": v[0], "in_set_only": v[1], "of": v[2]} for k, v in multi.items()}}
 
 
 def _trial_worker(args: tuple[int, float, float, int]) -> Trial | str:

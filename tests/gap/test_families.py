@@ -103,11 +103,11 @@ def test_hysteresis_loop_grows_faster_with_amplitude_for_a_larger_density_expone
 
 
 def test_creep_kernel_log_law_limit_and_unit_mean_slope_per_decade():
-    # growth from 10 ms to 100 s is 4 decades x 1 per decade for any exponent
-    tau = np.array([0.01, 100.0])
-    for n in (-0.4, 0.0, 0.2, 0.5):
+    # growth from 50 ms to 400 ms is log10(8) decades x 1 per decade for any exponent
+    tau = np.array([0.05, 0.4])
+    for n in (-0.4, 0.0, 1e-9, 0.2, 0.5):
         k = op.creep_kernel(tau - op.CREEP_TAU0_S, n)
-        assert (k[1] - k[0]) / 4.0 == pytest.approx(1.0, rel=1e-6)
+        assert (k[1] - k[0]) / np.log10(8.0) == pytest.approx(1.0, rel=1e-6)
         assert op.creep_kernel(np.array([1.0 - op.CREEP_TAU0_S]), n)[0] == pytest.approx(0.0, abs=1e-9)
     t = np.array([0.01, 0.1, 10.0])
     assert np.allclose(op.creep_kernel(t, 1e-9), np.log10(t + op.CREEP_TAU0_S), atol=1e-6)
@@ -198,7 +198,7 @@ def test_every_family_has_a_unit_bounds_and_shapes_inside_them():
 def test_a_one_sigma_fabrication_change_is_within_one_sigma_of_the_gain_prior():
     """The gain prior is the tolerances pushed through the closed form (Sigma = sum_k tol_k^2 j_k j_k^T), so a
     change of one parameter by its own tolerance has a Mahalanobis length of at most 1, and twice that change
-    twice the length: the yardstick `selfcheck.shift_sigmas` measures hidden shifts with."""
+    twice the length: the yardstick `selfcheck.gain_sigmas` measures hidden shifts with."""
     from analysis.gap import tolerances as tol
     from hamr_bench.model import actuator_preset
 
@@ -212,18 +212,35 @@ def test_a_one_sigma_fabrication_change_is_within_one_sigma_of_the_gain_prior():
             assert two == pytest.approx(2 * one, rel=0.1), (layers, name)
 
 
-def test_shift_sigmas_measures_the_hidden_fabrication_shifts_only():
+def test_gain_sigmas_measures_the_hidden_fabrication_shifts_and_springs_only():
     from analysis.gap.families import FABRICATION
-    from analysis.gap.selfcheck import EXCLUDED_FROM_DRAW, shift_sigmas
+    from analysis.gap.selfcheck import EXCLUDED_FROM_DRAW, gain_sigmas
     from sim_devices.scenarios import LIBRARY_EFFECTS, draw_scenario
 
     pool = tuple(n for n in LIBRARY_EFFECTS if n not in EXCLUDED_FROM_DRAW)
     found = 0
     for seed in range(40):
-        sig = shift_sigmas(seed)
+        sig = gain_sigmas(seed)
         sc = draw_scenario(seed, fixtures=("actuator",), pool=pool)
-        fabrication = {e.library_name for e in sc.effects if not e.decoy and e.library_name in FABRICATION}
-        assert set(sig) == fabrication, seed
+        on_gains = {e.library_name for e in sc.effects if not e.decoy and
+                    (e.library_name in FABRICATION or e.library_name in ("sensor_compliance", "base_compliance"))}
+        assert set(sig) == on_gains, seed
         found += bool(sig)
         assert all(v > 0 for v in sig.values())
     assert found >= 3
+
+
+def test_the_self_checks_creep_truth_is_read_in_the_candidates_unit():
+    from sim_devices.drive_chain import PronyCreep, creep_shape
+    from sim_devices.scenarios import LIBRARY_CREEP_SPAN_S, library_strength
+
+    assert np.log10(LIBRARY_CREEP_SPAN_S) == pytest.approx(op.CREEP_SPAN_DECADES)
+    # a time constant inside the span: much of its growth falls there; a slow one: almost none
+    fast = {"tau1_s": 0.3, "weight1": 1.0}
+    slow = {"tau1_s": 50.0, "weight1": 1.0}
+    g_fast, g_slow = (library_strength("creep", 0.01, s) for s in (fast, slow))
+    assert g_fast > 0.015 > 0.001 > g_slow > 0.0
+    # the candidate's kernel at that strength and a log law reproduce the same growth over the span
+    r = PronyCreep(0.01, **creep_shape(fast)).step_response(np.array([*LIBRARY_CREEP_SPAN_S, 1.0]))
+    k = op.creep_kernel(np.array(LIBRARY_CREEP_SPAN_S) - op.CREEP_TAU0_S, 0.0)
+    assert g_fast * (k[1] - k[0]) == pytest.approx((r[1] - r[0]) / r[2], rel=1e-9)

@@ -29,3 +29,37 @@ def test_top1_needs_the_truth_attributed_first_and_nulls_count_attributions_only
     assert s["top1_single"] == pytest.approx(0.5)
     assert s["truth_in_ambiguous_set_single"] == pytest.approx(0.5)
     assert s["false_attribution_rate_null"] == pytest.approx(0.5)
+
+
+def test_detectability_splits_by_how_far_a_hidden_effect_moves_the_specimens_mean_gains():
+    from analysis.gap.selfcheck import DETECTION_SIGMAS, _draw_pool, detectability_breakdown, gain_sigmas
+    from sim_devices.scenarios import draw_scenario
+
+    # find single-effect draws of a weak sensor spring, a strong base spring and a creep (no simulation)
+    picked: dict[str, int] = {}
+    for seed in range(400):
+        sc = draw_scenario(seed, fixtures=("actuator",), pool=_draw_pool())
+        if sc.kind != "single":
+            continue
+        name = sc.effects[0].name
+        sig = gain_sigmas(seed).get(name)
+        if name == "sensor_compliance" and sig < DETECTION_SIGMAS:
+            picked.setdefault("weak_spring", seed)
+        if name == "base_compliance" and sig > DETECTION_SIGMAS:
+            picked.setdefault("strong_spring", seed)
+        if name == "creep":
+            assert sig is None      # not an effect on the gains
+            picked.setdefault("creep", seed)
+    assert set(picked) == {"weak_spring", "strong_spring", "creep"}
+
+    def trial(seed, truth, best=None, sets=()):
+        return Trial(seed=seed, kind="single", truth=[truth], decoys=[], truth_strength={truth: None}, best=best,
+                     named={}, ambiguous_sets=[list(s) for s in sets])
+
+    trials = [trial(picked["weak_spring"], "sensor_compliance"),
+              trial(picked["strong_spring"], "base_compliance", sets=[["base_compliance", "width_loss"]]),
+              trial(picked["creep"], "creep", best="creep")]
+    rows = detectability_breakdown(trials)["top1_single"]
+    assert rows["gain_below_limit"] == {"right": 0, "in_set": 0, "of": 1}
+    assert rows["gain_above_limit"] == {"right": 0, "in_set": 1, "of": 1}
+    assert rows["other"] == {"right": 1, "in_set": 0, "of": 1}
