@@ -19,7 +19,7 @@ from analysis.gap.families import CANDIDATES, FAMILIES
 from analysis.gap.fitpool import FitPool
 from analysis.gap.features import GapData
 from analysis.gap.heldout import Judge
-from analysis.gap.problem import Fit, Problem
+from analysis.gap.problem import WIDE_GAIN_BOUND, Fit, Problem
 from analysis.gap.ranking import select
 from analysis.gap.results import Diagnosis
 from analysis.gap.screening import screen
@@ -46,7 +46,14 @@ def applicable(p: Problem, names: Sequence[str]) -> list[str]:
 
 
 def nominal_fit(p: Problem) -> Fit:
-    return p.solve((), p.initial_nuisances(), max_nfev=100)
+    """The presets with every nuisance fitted. A specimen gain stopped at the solver's bound means the presets are
+    further off than the bound allows: the problem then takes the wide bound, for this fit and every later one."""
+    fit = p.solve((), p.initial_nuisances(), max_nfev=100)
+    gains = [abs(v) for q, v in zip(fit.layout.params, fit.x, strict=True) if q.kind == "gain"]
+    if gains and max(gains) >= p.gain_bound * (1.0 - 1e-6) and p.gain_bound < WIDE_GAIN_BOUND:
+        p.gain_bound = WIDE_GAIN_BOUND
+        fit = p.solve((), fit.values(), max_nfev=100)
+    return fit
 
 
 def _whitened_gains(p: Problem, fit: Fit, g: str) -> np.ndarray:

@@ -119,3 +119,21 @@ def test_the_diagnosis_does_not_depend_on_jobs(tmp_path):
     one.pop("elapsed_s")
     two.pop("elapsed_s")
     assert json.dumps(one, sort_keys=True, default=float) == json.dumps(two, sort_keys=True, default=float)
+
+
+def test_presets_far_off_get_the_wide_gain_bound_and_the_nominal_fit_reaches_the_data(null_lab, tmp_path):
+    from analysis.gap.diagnose import nominal_fit
+    from analysis.gap.problem import GAIN_BOUND, WIDE_GAIN_BOUND
+
+    near = Problem(load_gap_data(null_lab))
+    nominal_fit(near)
+    assert near.gain_bound == GAIN_BOUND          # an ordinary lab keeps the narrow bound (and its solver path)
+
+    # plates a quarter of the preset width: the stiffness gain is log(1/4) = -1.39, beyond the narrow bound
+    narrow = tuple(Specimen(s.label, s.d31_scale, 0.25 * s.width_scale) for s in SPECIMENS)
+    far = Problem(load_gap_data(write_lab(tmp_path, Effects(), seed=5, specimens=narrow)))
+    fit = nominal_fit(far)
+    assert far.gain_bound == WIDE_GAIN_BOUND
+    stiffness = [fit.value("gain", g, 1) for g in far.groups]
+    assert all(-1.6 < b < -1.2 for b in stiffness), stiffness
+    assert fit.chi2_rows < 3.0 * far.y.size       # the rows fit; at the narrow bound they could not
