@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from analysis.gap import residuals as res
-from analysis.gap.families import CANDIDATES, FAMILIES
+from analysis.gap import tolerances as tol
+from analysis.gap.families import CANDIDATES, FABRICATION, FAMILIES
 from analysis.gap.fitpool import FitPool
 from analysis.gap.features import GapData
 from analysis.gap.heldout import Judge
@@ -26,6 +28,9 @@ from analysis.gap.screening import screen
 from analysis.gap.verdict import decide
 
 GAP_ALPHA = 1e-3
+# How far (in tolerance sigmas) a change common to a layer count's specimens must move their mean gains before the
+# population test can tell it from scatter: the 2-dof mean test at the gap level
+DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - GAP_ALPHA, 2)))
 
 
 def applicable(p: Problem, names: Sequence[str]) -> list[str]:
@@ -84,6 +89,33 @@ def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
             "p_value": min(1.0, 2.0 * min(p_total, p_common))}
 
 
+def detection_limits(p: Problem) -> dict[str, dict[str, Any]]:
+    """Per layer count: its specimens and, for each fabrication shift, the smallest change (a fraction, either sign,
+    within the candidate's range) that moves their mean gains by DETECTION_SIGMAS, where the population test starts
+    to see it in that layer count alone. A smaller shift common to every specimen looks like specimen scatter to
+    any method that allows the tolerances (a shift every layer count shares shows a little sooner); the limit
+    falls roughly as 1 / sqrt(specimens). None where no change within the range reaches it."""
+    out: dict[str, dict[str, Any]] = {}
+    for layers in sorted(set(p.group_type.values()), key=str):
+        groups = [g for g in p.groups if p.group_type[g] == layers]
+        actuator, w = p.group_engine[groups[0]].actuator, p.gain_whitening[groups[0]]
+        smallest: dict[str, float | None] = {}
+        for name in FABRICATION:
+            beyond = partial(_beyond_detection, actuator, w, len(groups), name)
+            found = [abs(optimize.brentq(beyond, 0.0, end, xtol=1e-6))
+                     for end in FAMILIES[name].bounds if end != 0 and beyond(end) > 0]
+            smallest[name] = min(found) if found else None
+        out[f"layers={layers}"] = {"specimens": len(groups), "smallest_common_shift": smallest}
+    return out
+
+
+def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s: float) -> float:
+    """How far a shift `s` of `name` common to n specimens moves their mean gains (in tolerance sigmas of that
+    mean), less DETECTION_SIGMAS."""
+    change = tol.log_outputs(tol.scaled(actuator, name, s)) - tol.log_outputs(actuator)
+    return math.sqrt(n) * float(np.linalg.norm(whitening @ change)) - DETECTION_SIGMAS
+
+
 def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
     """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), and its prior score."""
     out = {}
@@ -124,6 +156,6 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                      best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
-                     specimen_population=population)
+                     specimen_population=population, detection_limits=detection_limits(p))
     diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
     return diag

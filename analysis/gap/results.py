@@ -119,6 +119,7 @@ class Diagnosis:
     elapsed_s: float
     recordings: list[dict[str, Any]] = field(default_factory=list)
     specimen_population: dict[str, Any] = field(default_factory=dict)
+    detection_limits: dict[str, Any] = field(default_factory=dict)
     fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
 
     def ranking(self) -> list[dict[str, Any]]:
@@ -140,7 +141,7 @@ class Diagnosis:
                 "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained,
                 "cannot_separate": self.cannot_separate, "where": self.where,
                 "gap_above_noise": self.gap_above_noise, "nominal_lack_of_fit": self.nominal_lack_of_fit,
-                "specimen_population": self.specimen_population,
+                "specimen_population": self.specimen_population, "detection_limits": self.detection_limits,
                 "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
                 "heldout_units": "noise units (z = residual / pure-error standard error; for a specimen left "

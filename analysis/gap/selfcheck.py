@@ -31,9 +31,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from analysis.gap.diagnose import GAP_ALPHA
+from analysis.gap.diagnose import DETECTION_SIGMAS
 
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
@@ -153,8 +152,6 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     }
 
 
-# The population test on the specimens' mean gains (2 dof) at the diagnosis's gap level: sqrt(chi2_2(1 - alpha))
-DETECTION_SIGMAS = math.sqrt(float(stats.chi2.ppf(1 - GAP_ALPHA, 2)))
 
 
 def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,

@@ -94,3 +94,35 @@ def test_a_direction_only_the_prior_pins_keeps_its_variance():
     rows = np.array([[1e8, 1e8], [2e8, 2e8], [0.0, 1.0]])
     fit = Fit((), None, np.zeros(2), np.zeros(3), rows, {})  # type: ignore[arg-type]
     assert np.allclose(fit.covariance(), [[1.0, -1.0], [-1.0, 1.0]], rtol=1e-6)
+
+
+def test_a_shift_at_its_detection_limit_moves_the_mean_gains_to_the_population_tests_edge():
+    from analysis.gap import tolerances as tol
+    from analysis.gap.diagnose import DETECTION_SIGMAS, detection_limits
+    from analysis.gap.families import FAMILIES
+    from hamr_bench.model import actuator_preset
+
+    a = actuator_preset(2, "effective")
+
+    def problem(n):
+        groups = [f"g{k}" for k in range(n)]
+        return SimpleNamespace(groups=groups, group_type={g: 2 for g in groups},
+                               group_engine={g: SimpleNamespace(actuator=a) for g in groups},
+                               gain_whitening={g: tol.whitening(a) for g in groups})
+
+    one = detection_limits(problem(1))["layers=2"]
+    four = detection_limits(problem(4))["layers=2"]
+    assert one["specimens"] == 1 and four["specimens"] == 4
+    for name, limit in four["smallest_common_shift"].items():
+        # more specimens see smaller shifts (about 1 / sqrt(n): exactly so for a change linear in the shift)
+        assert limit < one["smallest_common_shift"][name] or one["smallest_common_shift"][name] is None
+        # four specimens all shifted by their limit (the sign it was found on): the common test's chi^2 is at the
+        # detection level; half that shift, either way, stays below it
+        def common_sigmas(s, name=name):
+            g = tol.whitening(a) @ (tol.log_outputs(tol.scaled(a, name, s)) - tol.log_outputs(a))
+            return float(np.sqrt(population_test(*_population([tuple(g)] * 4, [2] * 4))["common_chi2"]))
+
+        lo, hi = FAMILIES[name].bounds
+        signs = [x for x in (1.0, -1.0) if lo <= x * limit <= hi]
+        assert max(common_sigmas(x * limit) for x in signs) == pytest.approx(DETECTION_SIGMAS, rel=1e-4), name
+        assert all(common_sigmas(0.5 * x * limit) < DETECTION_SIGMAS for x in signs), name
