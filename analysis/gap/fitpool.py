@@ -3,7 +3,10 @@ fits every promising candidate on the effects named so far; those fits are indep
 `jobs` > 1 they run in worker processes (each on one BLAS thread), the slowest first. The workers are forked once
 the problem is built and inherit it (nothing large is sent to them); each returns its `Fit`. The fits are the same
 numbers as in one process (a fit depends on its start and the data only), so the diagnosis does not depend on
-`jobs`. Where fork is not available (Windows, macOS by default) the fits run in this process."""
+`jobs`. A selection step's fits also get their held-out z in the worker (`add_each_judged`: the judge's folds
+are the problem's, inherited the same way), which the main process would otherwise compute one fit after
+another while the workers wait. Where fork is not available (Windows, macOS by default) the fits run in this
+process."""
 
 from __future__ import annotations
 
@@ -14,18 +17,22 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
+from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.screening import add_each_here, grid_objectives_here
 from analysis.parallel import one_blas_thread
 
 _PROBLEM: Problem | None = None      # the problem a forked worker inherited
+_JUDGE: Judge | None = None          # and its held-out judge
 
 
-def _add_one(task: tuple[Fit, str, int]) -> tuple[Fit, float]:
-    base, name, max_nfev = task
+def _add_one(task: tuple[Fit, str, int, bool]) -> tuple[Fit, float]:
+    base, name, max_nfev, judged = task
     assert _PROBLEM is not None  # set before the workers were forked
     t0 = time.perf_counter()
     fit = add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
+    if judged and _JUDGE is not None:
+        _JUDGE.z(fit)            # kept in fit.extra, returned with the fit
     return fit, time.perf_counter() - t0
 
 
@@ -38,23 +45,31 @@ def _grid_one(task: tuple[Fit, str]) -> float:
 class FitPool:
     """`add_each(base, names, max_nfev)`: for each name, `base`'s effects plus that one, refitted."""
 
-    def __init__(self, p: Problem, jobs: int = 1) -> None:
+    def __init__(self, p: Problem, jobs: int = 1, judge: Judge | None = None) -> None:
         self.p = p
         self._pool: Any = None
         self._took: dict[str, float] = {}     # candidate -> how long its last fit took (s)
         if jobs > 1 and "fork" in multiprocessing.get_all_start_methods():
-            global _PROBLEM
-            _PROBLEM = p
+            global _PROBLEM, _JUDGE
+            _PROBLEM, _JUDGE = p, judge
             self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"),
                                              initializer=one_blas_thread)
 
     def add_each(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
+        return self._add_each(base, names, max_nfev, judged=False)
+
+    def add_each_judged(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
+        """`add_each`, each fit returned with its held-out z (a selection step judges every fit it makes)."""
+        return self._add_each(base, names, max_nfev, judged=True)
+
+    def _add_each(self, base: Fit, names: Sequence[str], max_nfev: int, judged: bool) -> dict[str, Fit]:
         if self._pool is None or len(names) < 2:
             return add_each_here(self.p)(base, names, max_nfev)
         # longest first (by what each candidate's last fit took; a new one counts as longest): the step waits for
         # its slowest fit, so that one should not start last
         order = sorted(names, key=lambda n: -self._took.get(n, math.inf))
-        done = dict(zip(order, self._pool.map(_add_one, [(base, n, max_nfev) for n in order]), strict=True))
+        tasks = [(base, n, max_nfev, judged) for n in order]
+        done = dict(zip(order, self._pool.map(_add_one, tasks), strict=True))
         self._took.update({n: took for n, (_, took) in done.items()})
         return {n: done[n][0] for n in names}
 
@@ -65,11 +80,11 @@ class FitPool:
         return dict(zip(names, self._pool.map(_grid_one, [(base, n) for n in names]), strict=True))
 
     def close(self) -> None:
-        global _PROBLEM
+        global _PROBLEM, _JUDGE
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
-            _PROBLEM = None
+            _PROBLEM, _JUDGE = None, None
 
     def __enter__(self) -> FitPool:
         return self

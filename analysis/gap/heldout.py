@@ -151,11 +151,16 @@ class Judge:
         self.resamples = [np.r_[r, r + n] for r in rows] if self.specimens else rows
 
     def z(self, fit: Fit) -> np.ndarray:
-        """Held-out z per row: the condition folds', then (with two or more specimens) the specimen folds'."""
+        """Held-out z per row: the condition folds', then (with two or more specimens) the specimen folds'.
+        Computed on one BLAS thread, as in the fit workers (`fitpool`), so the figures do not depend on where
+        they were computed (a thread count changes a pseudo-inverse's last digits, and with them its cut)."""
         if "heldout_z" not in fit.extra:
-            z, fit.extra["fold_steps"] = heldout_z(fit, self.folds)
-            if self.specimens:
-                z = np.r_[z, specimen_z(self.p, fit, self.specimens)]
+            from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+            with threadpool_limits(limits=1):
+                z, fit.extra["fold_steps"] = heldout_z(fit, self.folds)
+                if self.specimens:
+                    z = np.r_[z, specimen_z(self.p, fit, self.specimens)]
             fit.extra["heldout_z"] = z
         return fit.extra["heldout_z"]
 
