@@ -26,6 +26,7 @@ from analysis.gap.ranking import select
 from analysis.gap.results import Diagnosis
 from analysis.gap.screening import screen
 from analysis.gap.verdict import decide
+from hamr_bench.errors import ModelError
 
 GAP_ALPHA = 1e-3
 # How far (in tolerance sigmas) a change common to a layer count's specimens must move their mean gains before the
@@ -102,11 +103,23 @@ def detection_limits(p: Problem) -> dict[str, dict[str, Any]]:
         smallest: dict[str, float | None] = {}
         for name in FABRICATION:
             beyond = partial(_beyond_detection, actuator, w, len(groups), name)
-            found = [abs(optimize.brentq(beyond, 0.0, end, xtol=1e-6))
-                     for end in FAMILIES[name].bounds if end != 0 and beyond(end) > 0]
+            ends = [_realisable(beyond, end) for end in FAMILIES[name].bounds if end != 0]
+            found = [abs(optimize.brentq(beyond, 0.0, end, xtol=1e-6)) for end in ends if beyond(end) > 0]
             smallest[name] = min(found) if found else None
         out[f"layers={layers}"] = {"specimens": len(groups), "smallest_common_shift": smallest}
     return out
+
+
+def _realisable(beyond: Any, end: float) -> float:
+    """The candidate's range end, or as near to it as the actuator can take (a width loss at the family's bound
+    can leave a tapered plate's tip wider than the model allows): the largest 0.9^k x end it can."""
+    for _ in range(60):
+        try:
+            beyond(end)
+            return end
+        except ModelError:
+            end *= 0.9
+    return end
 
 
 def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s: float) -> float:

@@ -126,3 +126,20 @@ def test_a_shift_at_its_detection_limit_moves_the_mean_gains_to_the_population_t
         signs = [x for x in (1.0, -1.0) if lo <= x * limit <= hi]
         assert max(common_sigmas(x * limit) for x in signs) == pytest.approx(DETECTION_SIGMAS, rel=1e-4), name
         assert all(common_sigmas(0.5 * x * limit) < DETECTION_SIGMAS for x in signs), name
+
+
+def test_detection_limits_stay_within_what_the_actuator_can_take():
+    # a plate whose tip is 1.9 x its base: a 50 % kerf loss (the family's bound) would leave the tip wider than the
+    # model allows; the limit is searched within what it can take instead of stopping the diagnosis
+    from analysis.gap import tolerances as tol
+    from analysis.gap.diagnose import detection_limits
+    from hamr_bench.model import actuator as act
+    from hamr_bench.model import actuator_preset
+
+    a = act.with_changes(actuator_preset(2, "effective"), width_ratio=1.9)
+    with pytest.raises(Exception, match="width_ratio"):
+        tol.scaled(a, "width_loss", 0.5)
+    p = SimpleNamespace(groups=["g"], group_type={"g": 2}, group_engine={"g": SimpleNamespace(actuator=a)},
+                        gain_whitening={"g": tol.whitening(a)})
+    limits = detection_limits(p)["layers=2"]["smallest_common_shift"]
+    assert set(limits) >= {"width_loss", "pzt_thickness"}
