@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 import time
-from functools import partial
 from collections.abc import Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -74,7 +74,7 @@ def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
     Two chi^2 tests of the specimens' whitened gains (unit normal under the tolerance prior), each at half the
     gap level (Bonferroni): `common`, the mean of each layer count's specimens (n |mean|^2, 2 dof per layer
     count), which is what a fabrication shift of the batch moves, and is as sensitive to it with many specimens
-    as its own detection limit (`selfcheck.DETECTION_SIGMAS`) assumes; and `total`, every specimen (2 dof each),
+    as its detection limit (`DETECTION_SIGMAS`, `detection_limits`) assumes; and `total`, every specimen (2 dof each),
     which also sees specimens scattered beyond their tolerances in different directions. `p_value` is the
     smaller p times 2."""
     by_type: dict[Any, list[np.ndarray]] = {}
@@ -123,10 +123,7 @@ def _realisable(beyond: Any, end: float) -> float:
 
 
 def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s: float) -> float:
-    """How far a shift `s` of `name` common to n specimens moves their mean gains (in tolerance sigmas of that
-    mean), less DETECTION_SIGMAS."""
-    change = tol.log_outputs(tol.scaled(actuator, name, s)) - tol.log_outputs(actuator)
-    return math.sqrt(n) * float(np.linalg.norm(whitening @ change)) - DETECTION_SIGMAS
+    return tol.common_shift_sigmas(actuator, whitening, n, name, s) - DETECTION_SIGMAS
 
 
 def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:

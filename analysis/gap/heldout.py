@@ -19,6 +19,7 @@ set to the prior's centre exactly (the model re-evaluated there), not by a linea
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut
@@ -155,8 +156,6 @@ class Judge:
         Computed on one BLAS thread, as in the fit workers (`fitpool`), so the figures do not depend on where
         they were computed (a thread count changes a pseudo-inverse's last digits, and with them its cut)."""
         if "heldout_z" not in fit.extra:
-            from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
-
             with threadpool_limits(limits=1):
                 z, fit.extra["fold_steps"] = heldout_z(fit, self.folds)
                 if self.specimens:

@@ -223,8 +223,8 @@ class Problem:
     def _nuisance_params(self) -> list[Param]:
         """What every model carries whatever effects it names: per specimen group its two log gains, per session
         its contact shift, per sensor chain its lag."""
-        b = self.gain_bound
-        params = [Param("gain", (g, j), -b, b, 0.05, 0.0) for g in self.groups for j in (0, 1)]
+        gb = self.gain_bound
+        params = [Param("gain", (g, j), -gb, gb, 0.05, 0.0) for g in self.groups for j in (0, 1)]
         for s in self.sessions:
             fixture = next(e.run.fixture for e in self.engines if self.session_of(e) == s)
             b = SHIFT_BOUND_M[fixture]

@@ -165,6 +165,7 @@ def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 
     that of the linear part. Recomputed from the trial's seed (no simulation), so a raw file of an earlier run
     can be scored too."""
     from analysis.gap import tolerances as tol
+    from analysis.gap.families import FABRICATION
     from hamr_bench.model import actuator as act
     from hamr_bench.model import actuator_preset
     from sim_devices.scenarios import draw_scenario
@@ -173,22 +174,18 @@ def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 
                        fixtures=("actuator",), pool=_draw_pool())
     a = actuator_preset(sc.layers, sc.params_set)
     w = tol.whitening(a)
+    n = len(sc.specimens)
     out = {}
     for e in sc.effects:
         if e.decoy or not e.library_name or e.library_strength is None:
             continue
-        if e.library_name == "sensor_compliance":
-            ck = float(e.library_strength) * act.stiffness_N_per_m(a)
-            g = np.array([0.0, math.log(1.0 / (1.0 + ck))])
-        elif e.library_name == "base_compliance":
-            g = np.array([0.0, math.log(1.0 - e.observable["blocked_force_loss_250V"])])
-        else:
-            try:
-                shifted = tol.scaled(a, e.library_name, float(e.library_strength))
-            except KeyError:        # neither a fabrication shift nor a spring
-                continue
-            g = tol.log_outputs(shifted) - tol.log_outputs(a)
-        out[e.library_name] = float(math.sqrt(len(sc.specimens)) * np.linalg.norm(w @ g))
+        name, strength = e.library_name, float(e.library_strength)
+        if name in FABRICATION:
+            out[name] = tol.common_shift_sigmas(a, w, n, name, strength)
+        elif name in ("sensor_compliance", "base_compliance"):
+            ck = strength * act.stiffness_N_per_m(a)
+            loss = ck / (1.0 + ck) if name == "sensor_compliance" else e.observable["blocked_force_loss_250V"]
+            out[name] = math.sqrt(n) * float(np.linalg.norm(w @ np.array([0.0, math.log1p(-loss)])))
     return out
 
 

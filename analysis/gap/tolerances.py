@@ -81,6 +81,14 @@ def whitening(a: ActuatorParams) -> np.ndarray:
     return np.linalg.inv(np.linalg.cholesky(gain_prior_cov(a)))
 
 
+def common_shift_sigmas(a: ActuatorParams, whitening: np.ndarray, n_specimens: int, name: str, s: float) -> float:
+    """How far a change s of fabrication parameter `name`, common to n specimens, moves their mean gains, in units
+    of the tolerance prior's spread of that mean: sqrt(n) x the Mahalanobis length of its (log stroke, log
+    stiffness) change (`whitening`: this actuator's, `whitening(a)`)."""
+    change = log_outputs(scaled(a, name, s)) - log_outputs(a)
+    return math.sqrt(n_specimens) * float(np.linalg.norm(whitening @ change))
+
+
 def band(name: str, tolerance: float) -> float:
     """Half-width of the tolerance band of a fabrication candidate's strength."""
     return BAND_SIGMAS * tolerance
