@@ -16,6 +16,7 @@ Strength 0 of every candidate is the nominal model exactly (the same path, the o
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
@@ -62,12 +63,14 @@ Effects = dict[str, EffectValue]
 @dataclass(frozen=True)
 class RunNuisance:
     """What one run's prediction needs besides the effects: its specimen gains (log d31, log width), its
-    session's contact shift (m; how much further in the sensor surface sits than the run's zero says) and the
-    lag of each sensor chain (s)."""
+    session's contact shift (m; how much further in the sensor surface sits than the run's zero says), the
+    lag of each sensor chain (s) and, where a field-dependent effect is fitted, its plates' log thickness (the
+    gains absorb what thickness does to stroke and stiffness, not where along the field a voltage lands)."""
 
     gains: tuple[float, float] = (0.0, 0.0)
     shift_m: float = 0.0
     lag_s: dict[str, float] = field(default_factory=dict)
+    log_plate_thickness: float = 0.0   # the specimen's plates against the nominal: the field a voltage makes
 
 
 def _zoh(t_cmd: np.ndarray, v_cmd: np.ndarray, t: np.ndarray, before: float = 0.0) -> np.ndarray:
@@ -207,6 +210,7 @@ class RunEngine:
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
         self._memory: list[np.ndarray] | None = None
+        self._log_plates: list[np.ndarray] | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
@@ -252,9 +256,13 @@ class RunEngine:
         """[G(V_drive), G(V_bias - V_drive)] on the dense grid (shape (2, n)): each plate's d31 relative to the
         nominal one at its voltage."""
         vb, vd = self.dense_vb, self.dense_vd
-        q = d31.shape("curvature", "field_dependent_d31")
+        knee = 10.0 ** d31.shape("log10_knee_V_per_um", "field_dependent_d31")
+        p = d31.shape("steepness", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
-        return np.stack([op.plate_gain(v, t_p, d31.strength, q, ref) for v in (vd, vb - vd)])
+        if self._log_plates is None:   # the plates' voltages are the run's: their logs are computed once
+            self._log_plates = [op.log_magnitude(v) for v in (vd, vb - vd)]
+        return np.stack([op.plate_gain(v, t_p, d31.strength, knee, p, ref, log_v)
+                         for v, log_v in zip((vd, vb - vd), self._log_plates, strict=True)])
 
     def _plate_memory(self) -> list[np.ndarray]:
         """Each plate's play memory (`operators.plate_memory`): it depends on the drive alone, so it is computed
@@ -323,7 +331,8 @@ class RunEngine:
             plates = self._memo(("hysteresis",) + loops, lambda: self._plate_loops(*loops))
         d_key = None
         if d31 is not None and d31.strength != 0:
-            d_key = (d31.strength, d31.shape("curvature", "field_dependent_d31"), t_p)
+            d_key = (d31.strength, d31.shape("log10_knee_V_per_um", "field_dependent_d31"),
+                     d31.shape("steepness", "field_dependent_d31"), t_p)
             plates = plates * self._memo(("gain",) + d_key, lambda: self._plate_gains(d31, t_p))
         y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
@@ -377,7 +386,7 @@ class RunEngine:
         a = self.actuator_for(effects, nuis.gains)
         lags = (nuis.lag_s.get("force_N", 0.0), nuis.lag_s.get("displacement_m", 0.0))
         te = t - np.where(is_force, *lags)
-        y = self._drive_at(times, te, lags, effects, a.pzt_thickness_m)
+        y = self._drive_at(times, te, lags, effects, a.pzt_thickness_m * math.exp(nuis.log_plate_thickness))
         backlash = effects.get("stage_backlash")
         b = backlash.strength if backlash is not None else 0.0
         out = np.zeros(t.shape)

@@ -8,7 +8,7 @@ pairs side by side):
 |   | back through its first rise (tip share c mixes in the unmapped sum) | largest loop gap / span, full drive |
 | creep | power-law (Nutting) superposition of every drive increment, exponent n of either sign; log law at 0 |
 |   | | growth per decade, 50 - 400 ms       |
-| field_dependent_d31 | d31 gain polynomial in field, either sign, quadratic share q | d31(250 V) / d31(100 V) - 1 |
+| field_dependent_d31 | d31 gain 1 + a E^p / (E^p + c^p), knee c, steepness p, either sign | d31(250 V)/d31(100 V) - 1 |
 | base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
 | sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
 | width_loss | constant kerf per cut edge on the tapered plate | fraction of the mean width lost |
@@ -61,8 +61,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            "power-law superposition of drive increments (log law at n = 0)", "drive",
            {"exponent": Shape(0.0, -0.8, 0.6, 0.3)}, scale=0.01),
     Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),
-           "d31 gain polynomial in field (linear + quadratic, either sign)", "drive",
-           {"curvature": Shape(0.5, -1.0, 2.0, 1.0)}, scale=0.2),
+           "d31 gain 1 + a h(E), h a knee E^p / (E^p + c^p) in field", "drive",
+           {"log10_knee_V_per_um": Shape(0.5, -0.7, 1.0, 0.6), "steepness": Shape(1.5, 0.5, 8.0, 2.0)},
+           scale=0.2),
     Family("base_compliance", "blocked-force loss of the 2-layer actuator at 250 V", (0.0, 0.8),
            "series spring at the actuator base, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
            {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=0.1),

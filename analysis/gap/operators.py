@@ -1,6 +1,6 @@
 """The numerical operators the candidate families are built from: the play operator and each plate's
-play-sum hysteresis, the power-law creep kernel and its superposition, the
-polynomial d31(E) gain, the power-law series spring solved against the actuator, the penalised-spline baseline.
+play-sum hysteresis, the power-law creep kernel and its superposition, the knee (Hill) d31(E) gain, the
+power-law series spring solved against the actuator, the penalised-spline baseline.
 
 Pure functions of arrays; no knowledge of recordings or runs (`engine.py` applies them)."""
 
@@ -187,36 +187,46 @@ def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ field-dependent d31
-D31_FIELD_SCALE_V_PER_UM = 2.0   # the polynomial's variable is E / 2 V/um
 D31_ANCHOR_V_PER_UM = 1.0        # the nominal d31 is taken to hold here (an effective value over the range)
 D31_REF_VOLTS = (100.0, 250.0)   # the strength is the gain at 250 V over the gain at 100 V (nominal plate)
 
 
-def d31_gain(field_V_per_um: np.ndarray, slope: float, curvature: float) -> np.ndarray:
-    """G(E) = 1 + a [(1 - q) x + q x^2], x = E / 2 V/um: a polynomial in field of either sign (a < 0: d31 falls
-    with field), q the quadratic share. Floored at 0.05 (a d31 cannot change sign)."""
-    x = np.abs(field_V_per_um) / D31_FIELD_SCALE_V_PER_UM
-    return np.maximum(1.0 + slope * ((1.0 - curvature) * x + curvature * x * x), 0.05)
+def d31_knee_curve(field_V_per_um: np.ndarray, knee_V_per_um: float, steepness: float) -> np.ndarray:
+    """h(E) = E^p / (E^p + c^p): rises from 0 to 1 about the knee field c. A knee beyond the drive range leaves
+    a power law (E/c)^p (p = 1 linear, p = 2 quadratic); a knee inside it saturates, sharply for a large p."""
+    return _knee_of_log(log_magnitude(field_V_per_um), knee_V_per_um, steepness)
 
 
-def d31_slope(strength: float, curvature: float, pzt_thickness_m: float) -> float:
-    """The polynomial's coefficient a for which G(250 V / t_p) / G(100 V / t_p) - 1 = strength (t_p the nominal
-    plate): the ratio is a Moebius function of a, inverted in closed form."""
-    x1, x2 = (v / pzt_thickness_m * 1e-6 / D31_FIELD_SCALE_V_PER_UM for v in D31_REF_VOLTS)
-    p1 = (1.0 - curvature) * x1 + curvature * x1 * x1
-    p2 = (1.0 - curvature) * x2 + curvature * x2 * x2
-    den = p2 - (1.0 + strength) * p1
+def log_magnitude(x: np.ndarray) -> np.ndarray:
+    """log |x|, -inf at 0 (where the knee curve is 0)."""
+    with np.errstate(divide="ignore"):
+        return np.log(np.abs(np.asarray(x, float)))
+
+
+def _knee_of_log(log_field: np.ndarray, knee_V_per_um: float, steepness: float) -> np.ndarray:
+    # the logistic of p log(E / c), as 0.5 + 0.5 tanh (faster than expit on long grids); log 0 = -inf gives 0
+    return 0.5 + 0.5 * np.tanh(0.5 * steepness * (log_field - math.log(knee_V_per_um)))
+
+
+def d31_amplitude(strength: float, knee_V_per_um: float, steepness: float, pzt_thickness_m: float) -> float:
+    """The amplitude a of G(E) = 1 + a h(E) for which G(250 V / t_p) / G(100 V / t_p) - 1 = strength (t_p the
+    nominal plate): the ratio is a Moebius function of a, inverted in closed form."""
+    h1, h2 = d31_knee_curve(np.array(D31_REF_VOLTS) / pzt_thickness_m * 1e-6, knee_V_per_um, steepness)
+    den = h2 - (1.0 + strength) * h1
     return strength / den if abs(den) > 1e-12 else 0.0
 
 
-def plate_gain(v_V: np.ndarray, pzt_thickness_m: float, strength: float, curvature: float,
-               ref_thickness_m: float | None = None) -> np.ndarray:
-    """G(E) / G(E_anchor) at a plate's voltage: its d31 relative to the nominal one. The strength refers to the
-    nominal plate `ref_thickness_m` (default: this one)."""
-    a = d31_slope(strength, curvature, ref_thickness_m or pzt_thickness_m)
-    e = np.abs(v_V) / pzt_thickness_m * 1e-6
-    anchor = float(d31_gain(np.array([D31_ANCHOR_V_PER_UM]), a, curvature)[0])
-    return d31_gain(e, a, curvature) / anchor
+def plate_gain(v_V: np.ndarray, pzt_thickness_m: float, strength: float, knee_V_per_um: float, steepness: float,
+               ref_thickness_m: float | None = None, log_v: np.ndarray | None = None) -> np.ndarray:
+    """G(E) / G(E_anchor) at a plate's voltage, G = 1 + a h(E) floored at 0.05 (a d31 cannot change sign): its
+    d31 relative to the nominal one. The strength refers to the nominal plate `ref_thickness_m` (default: this
+    one). `log_v`: log |v_V| if already known (a run's plate voltages are fixed; only the plate and curve vary)."""
+    a = d31_amplitude(strength, knee_V_per_um, steepness, ref_thickness_m or pzt_thickness_m)
+    log_field = (log_magnitude(v_V) if log_v is None else log_v) - math.log(pzt_thickness_m * 1e6)
+    curve = _knee_of_log(log_field, knee_V_per_um, steepness)
+    anchor = max(1.0 + a * float(d31_knee_curve(np.array([D31_ANCHOR_V_PER_UM]), knee_V_per_um, steepness)[0]),
+                 0.05)
+    return np.maximum(1.0 + a * curve, 0.05) / anchor
 
 
 # ------------------------------------------------------------------ series spring (power law, push / pull)

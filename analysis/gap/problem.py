@@ -1,6 +1,7 @@
 """The joint fit every stage of the diagnosis stands on: observed phase rows with their pure-error noise, the
 nominal model with each SPECIMEN's gains under the tolerance prior (a random effect, `tolerances.py`), each
-SESSION's contact shift, each sensor chain's lag, and any set of candidate effects (strength and shape
+SESSION's contact shift, each sensor chain's lag (with an effect that reads the field, each specimen's plate
+thickness), and any set of candidate effects (strength and shape
 parameters, shapes under weak priors), solved as one bounded nonlinear least-squares problem.
 
 The objective is the sum of squared residuals in noise units, z = (measured - model) / standard error, plus the
@@ -27,6 +28,10 @@ from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import GapData
 
+# Effects that read the field across a plate: with one of them, each specimen's plate thickness is fitted (under
+# its tolerance) where its voltage lands on the curve, as a sharp change in field shows it, beside the two gains.
+FIELD_EFFECTS = ("field_dependent_d31",)
+PLATE_BOUND = 0.2        # log plate thickness, +-5 tolerance sigmas
 LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 # |log gain| (a factor e): beyond any tolerance, a bound for the solver only. A nominal model so far off that its
@@ -209,6 +214,8 @@ class Problem:
                 params.append(Param("shape", (n, s_name), shape.lo, shape.hi, max(shape.prior_sd, 1e-3),
                                     shape.default))
         params += self._nuisance_params()
+        if any(n in FIELD_EFFECTS for n in names):
+            params += [Param("plate", (g,), -PLATE_BOUND, PLATE_BOUND, 0.02, 0.0) for g in self.groups]
         if "sensor_drift" in names:
             for k in range(len(self.engines)):
                 for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default
@@ -235,7 +242,7 @@ class Problem:
         return params
 
     def _n_prior(self, names: tuple[str, ...], params: list[Param]) -> int:
-        n = 2 * len(self.groups) + sum(1 for p in params if p.kind == "shape")
+        n = 2 * len(self.groups) + sum(1 for p in params if p.kind in ("shape", "plate"))
         n += sum(self._smooth_rows(k) for k in range(len(self.engines))) if "sensor_drift" in names else 0
         n += sum(1 for p in params if p.kind == "drift")
         return n
@@ -257,7 +264,7 @@ class Problem:
         for i, p in enumerate(lay.params):
             if p.kind in ("strength", "shape"):
                 rows = force_rows if p.key[0] == "sensor_drift" else everything
-            elif p.kind == "gain":
+            elif p.kind in ("gain", "plate"):
                 rows = self._runs_where(lambda e, g=p.key[0]: self.group_of(e) == g)
             elif p.kind == "shift":
                 rows = self._runs_where(lambda e, s_=p.key[0]: e.has_contact() and self.session_of(e) == s_)
@@ -281,7 +288,7 @@ class Problem:
                 out.setdefault(lay.index[("gain", g, comp)], []).extend([j, j + 1])
             j += 2
         for i, p in enumerate(lay.params):
-            if p.kind == "shape":
+            if p.kind in ("shape", "plate"):
                 out.setdefault(i, []).append(j)
                 j += 1
         if "sensor_drift" in lay.names:
@@ -337,7 +344,8 @@ class Problem:
         s_key = ("shift", self.session_of(e))
         shift = float(x[lay.index[s_key]]) if e.has_contact() and s_key in lay.index else 0.0
         lag = {q: float(x[lay.index[("lag",) + self.chain_of(e, q)]]) for q in self._quantities(e)}
-        return RunNuisance(gains, shift, lag)
+        plate = float(x[lay.index[("plate", g)]]) if ("plate", g) in lay.index else 0.0
+        return RunNuisance(gains, shift, lag, plate)
 
     def _acts_on(self, k: int, name: str) -> bool:
         """Can effect `name` change run k's prediction? (The drift is added outside the run model; a design
@@ -358,7 +366,7 @@ class Problem:
         # parameter (or an effect that cannot act on this run) reuses it
         key = (tuple(sorted((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in effects.items()
                             if self._acts_on(k, n))),
-               nuis.gains, nuis.shift_m, tuple(sorted(nuis.lag_s.items())))
+               nuis.gains, nuis.shift_m, tuple(sorted(nuis.lag_s.items())), nuis.log_plate_thickness)
         cache = self._cache[k]
         v = cache.get(key)
         if v is not None:
@@ -399,6 +407,8 @@ class Problem:
         for p, v in zip(lay.params, x, strict=True):
             if p.kind == "shape":
                 out.append((v - FAMILIES[p.key[0]].shapes[p.key[1]].default) / p.scale)
+            elif p.kind == "plate":
+                out.append(v / tol.TOLERANCE["pzt_thickness"])
         if "sensor_drift" in lay.names:
             for k in range(len(self.engines)):
                 n_s = self._smooth_rows(k)

@@ -1,6 +1,7 @@
 """Stage 3, rank: forward selection by held-out gap. From the nominal fit, each promising candidate is added in
-turn to the effects named so far and the whole refitted; the one that lowers the held-out gap most is named if its
-in-sample improvement passes the likelihood-ratio test and its held-out reduction's bootstrap interval is above 0.
+turn to the effects named so far and the whole refitted; of those whose in-sample improvement passes the
+likelihood-ratio test and whose held-out reduction's bootstrap interval is above 0, the one that lowers the held-out
+gap most is named.
 Candidates whose addition is as good on both counts are named with it as one ambiguous set. The selection stops
 when nothing passes, when the held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The
 waterfall is the held-out gap after each addition."""
@@ -70,11 +71,14 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
             rows.append(StepCandidate(name, current.objective - f.objective, ho, judge.reduction_ci(current, f),
                                       float(f.effects[name].strength)))
         rows.sort(key=lambda c: c.heldout.rms)
-        lead = _lead(rows, tried, judge)
-        thr = float(stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, lead.name))) * scale2
-        if not (lead.improvement > thr and lead.reduction_ci95[0] > 0):
+        # each candidate against its own gate: one with many parameters (the drift spline) that fails it must not
+        # hide one with few that passes
+        passing = [c for c in rows if c.reduction_ci95[0] > 0 and c.improvement > scale2 * float(
+            stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, c.name)))]
+        if not passing:
             rejected = rows
             break
+        lead = _lead(passing, tried, judge)
         ambiguous = tuple(c.name for c in rows if c.name != lead.name and _tie(c, lead, tried, judge, scale2))
         current = tried[lead.name]
         ho = judge.heldout(current)

@@ -101,11 +101,9 @@ def prior_strength(p: Problem, base: Fit, name: str) -> float:
 
 
 def n_params(p: Problem, name: str) -> int:
-    """Free parameters a candidate adds: its strength and shapes (the drift: its baseline coefficients)."""
-    f = FAMILIES[name]
-    if f.kind == "baseline":
-        return max(1, p.layout((name,)).params.__len__() - p.layout(()).params.__len__())
-    return 1 + len(f.shapes)
+    """Free parameters a candidate adds: its strength and shapes (the drift: its baseline coefficients; an effect
+    that reads the field: each specimen's plate thickness too)."""
+    return max(1, len(p.layout((name,)).params) - len(p.layout(()).params))
 
 
 def overdispersion(p: Problem, fit: Fit, n_extra: int = 0) -> float:

@@ -9,7 +9,8 @@ from the final joint fit, its share of the held-out gap, and a verdict:
 - `within tolerance`: a fabrication shift whose interval reaches into its parameter's tolerance band: specimen
   scatter, not an effect;
 - `unexplained`: named, but everything named together closes less than half of the gap (a partial fit of
-  something outside the library).
+  something outside the library), or its strength's interval includes 0 (a drive, contact, design or stage
+  effect whose size cannot be told from none: its shape, not its size, took up a misfit).
 
 `best` is the first attributed effect in waterfall order, or null."""
 
@@ -101,6 +102,11 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
             verdict = "within tolerance"
         else:
             verdict = "attributed"
+        if verdict == "attributed" and FAMILIES[name].kind not in ("params", "baseline") and ci[0] <= 0.0 <= ci[1]:
+            # the fit's gain came from the family's shape at a size indistinguishable from none (a d31 knee below
+            # the reference fields bends the curve where its unit, the 250 V / 100 V ratio, does not look)
+            verdict = "unexplained"
+            notes.append("its strength's 95 % interval includes 0, the nominal model")
         if total_closed < CLOSED_MIN and verdict == "attributed":
             verdict = "unexplained"
             notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")

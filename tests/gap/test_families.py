@@ -129,11 +129,11 @@ def test_creep_response_of_a_step_is_the_kernel():
     assert np.allclose(r[100:], op.creep_kernel(tau, 0.2), rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("s,q", [(0.8, 0.0), (0.8, 1.0), (-0.4, 0.5), (1.0, -0.5)])
-def test_d31_strength_is_the_gain_ratio_250_to_100_volts_either_sign(s, q):
+@pytest.mark.parametrize("s,knee,p", [(0.8, 3.0, 1.0), (0.8, 3.0, 2.0), (-0.4, 0.5, 4.0), (1.0, 1.2, 8.0)])
+def test_d31_strength_is_the_gain_ratio_250_to_100_volts_either_sign(s, knee, p):
     t_p = 155e-6
     v = np.array([100.0, 250.0])
-    g = op.plate_gain(v, t_p, s, q)
+    g = op.plate_gain(v, t_p, s, knee, p)
     assert g[1] / g[0] - 1.0 == pytest.approx(s, rel=1e-9)
     assert np.all(g > 0)
 
@@ -244,3 +244,30 @@ def test_the_self_checks_creep_truth_is_read_in_the_candidates_unit():
     r = PronyCreep(0.01, **creep_shape(fast)).step_response(np.array([*LIBRARY_CREEP_SPAN_S, 1.0]))
     k = op.creep_kernel(np.array(LIBRARY_CREEP_SPAN_S) - op.CREEP_TAU0_S, 0.0)
     assert g_fast * (k[1] - k[0]) == pytest.approx((r[1] - r[0]) / r[2], rel=1e-9)
+
+
+@pytest.mark.parametrize("switch,width,strength", [(0.5, 0.15, -0.3), (0.9, 0.2, 0.5), (1.3, 0.5, 0.5)])
+def test_d31_knee_family_reaches_the_benchs_logistic_switch_in_field(switch, width, strength):
+    """The bench's d31 can be a logistic in field (a different formula): some knee and steepness follow it within
+    5 % of the gain over 5-250 V (the largest misfit is at low field, where the logistic has a floor), where the
+    quadratic family it replaced missed by 13 % and 11 % on the first two."""
+    from scipy.optimize import minimize
+
+    from sim_devices.drive_chain import FieldGain
+
+    t_p = 127e-6
+    law = FieldGain(strength, "logistic", switch_field_V_per_um=switch, width_V_per_um=width)
+    v = np.linspace(5.0, 250.0, 50)
+    truth = law(v / t_p) / law(op.D31_ANCHOR_V_PER_UM * 1e6)
+    strength = float(truth[-1] / truth[np.argmin(abs(v - 100.0))] - 1.0)
+
+    shapes = FAMILIES["field_dependent_d31"].shapes
+    knee, p = shapes["log10_knee_V_per_um"], shapes["steepness"]
+
+    def misfit(z):   # within the family's shape bounds
+        g = op.plate_gain(v, t_p, strength, 10.0 ** np.clip(z[0], knee.lo, knee.hi), np.clip(z[1], p.lo, p.hi))
+        return float(np.max(np.abs(g / truth - 1.0)))
+
+    best = min((minimize(misfit, [k, p], method="Nelder-Mead") for k in (-0.3, 0.0, 0.3) for p in (2.0, 6.0)),
+               key=lambda r: r.fun)
+    assert best.fun < 0.05
