@@ -127,12 +127,15 @@ def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s
 
 
 def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
-    """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), and its prior score."""
+    """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), its prior score, and,
+    where a field-dependent effect was fitted, its plates' thickness against the nominal."""
     out = {}
     for g in p.groups:
         a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
         score = float(np.linalg.norm(_whitened_gains(p, fit, g)))
         out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
+        if ("plate", g) in fit.layout.index:
+            out[g]["plate_thickness_change"] = math.expm1(fit.value("plate", g))
     return out
 
 

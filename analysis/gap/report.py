@@ -170,12 +170,14 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     lines += ["", f"Left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise "
               f"[{rest['heldout_rms_ci95'][0]:.2f}, {rest['heldout_rms_ci95'][1]:.2f}]"
               + (" (at the noise floor)." if rest["at_noise_floor"] else "."),
-              "", f"**Best: {result['best'] or 'none'}**", "", "## Specimens", "",
-              "| specimen | free stroke vs preset | stiffness vs preset | tolerance sigmas |", "|---|---|---|---|"]
+              "", f"**Best: {result['best'] or 'none'}**", "", "## Specimens", ""]
+    plates = any("plate_thickness_change" in v for v in result["specimens"].values())
+    lines += ["| specimen | free stroke vs preset | stiffness vs preset | tolerance sigmas |"
+              + (" plate thickness (fitted with d31(E)) |" if plates else ""), "|---|---|---|---|" + "---|" * plates]
     for g, v in result["specimens"].items():
         label = g.replace("|", "\\|")      # a group key holds '|', which would split the table's cell
         lines.append(f"| {label} | {v['stroke_change']:+.1%} | {v['stiffness_change']:+.1%} | "
-                     f"{v['tolerance_sigmas']:.2f} |")
+                     f"{v['tolerance_sigmas']:.2f} |" + (f" {v['plate_thickness_change']:+.1%} |" if plates else ""))
     lines += ["", "A fabrication shift common to a layer count's specimens shows from these sizes on (smaller ones "
               "look like specimen scatter; the limits fall roughly as 1 / sqrt(specimens)):", ""]
     for layer_count, v in result.get("detection_limits", {}).items():

@@ -9,8 +9,8 @@ from the final joint fit, its share of the held-out gap, and a verdict:
 - `within tolerance`: a fabrication shift whose interval reaches into its parameter's tolerance band: specimen
   scatter, not an effect;
 - `unexplained`: named, but everything named together closes less than half of the gap (a partial fit of
-  something outside the library), or its strength's interval includes 0 (a drive, contact, design or stage
-  effect whose size cannot be told from none: its shape, not its size, took up a misfit).
+  something outside the library), or its size cannot be told from none (a strength interval that includes 0; a
+  drift wander whose noise-corrected interval is 0 - 0): its shape, not its size, took up a misfit.
 
 `best` is the first attributed effect in waterfall order, or null."""
 
@@ -60,6 +60,19 @@ def beyond_tolerance(name: str, ci: tuple[float, float]) -> bool | None:
     return bool(ci[0] > b or ci[1] < -b)
 
 
+def _size_not_told_from_none(name: str, ci: tuple[float, float]) -> bool:
+    """An effect whose fit gained from its shape at a size that cannot be told from none: a drive, contact, design
+    or stage strength whose interval includes 0 (a d31 knee below the reference fields bends the curve where its
+    unit, the 250 V / 100 V ratio, does not look), or a drift wander whose noise-corrected interval is 0 - 0. (A
+    wander's lower end is 0 whenever the noise adds as much as the drift: that alone does not say none.)"""
+    kind = FAMILIES[name].kind
+    if kind == "params":
+        return False
+    if kind == "baseline":
+        return ci[1] <= 0.0
+    return ci[0] <= 0.0 <= ci[1]
+
+
 def lag_ambiguity(p: Problem, fit: Fit, name: str) -> float:
     """Largest |correlation| between the effect's strength and a sensor chain's lag in the joint fit."""
     if ("strength", name) not in fit.layout.index:
@@ -102,11 +115,11 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
             verdict = "within tolerance"
         else:
             verdict = "attributed"
-        if verdict == "attributed" and FAMILIES[name].kind not in ("params", "baseline") and ci[0] <= 0.0 <= ci[1]:
-            # the fit's gain came from the family's shape at a size indistinguishable from none (a d31 knee below
-            # the reference fields bends the curve where its unit, the 250 V / 100 V ratio, does not look)
+        if verdict == "attributed" and _size_not_told_from_none(name, ci):
             verdict = "unexplained"
-            notes.append("its strength's 95 % interval includes 0, the nominal model")
+            notes.append("the fitted wander is no more than the baseline's noise puts there (interval 0 - 0)"
+                         if FAMILIES[name].kind == "baseline" else
+                         "its strength's 95 % interval includes 0, the nominal model")
         if total_closed < CLOSED_MIN and verdict == "attributed":
             verdict = "unexplained"
             notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")

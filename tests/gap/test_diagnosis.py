@@ -58,6 +58,21 @@ def test_strength_zero_is_the_nominal_model_exactly(null_lab):
             e.effective_drive({}, e.actuator.pzt_thickness_m).tolist()
 
 
+def test_plate_thickness_is_fitted_only_with_d31_and_moves_where_a_voltage_lands_on_its_curve(null_lab):
+    p = Problem(load_gap_data(null_lab))
+    assert not any(q.kind == "plate" for q in p.layout(("hysteresis",)).params)
+    lay = p.layout(("field_dependent_d31",))
+    plates = [q.key[0] for q in lay.params if q.kind == "plate"]
+    assert sorted(plates) == sorted(p.groups)
+    e = p.engines[0]
+    t_p = e.actuator.pzt_thickness_m
+    step = {"field_dependent_d31": EffectValue(0.5, {"log10_knee_V_per_um": 0.0, "steepness": 6.0})}
+    # a sharp step at 1 V/um: 5 % thicker plates put each voltage lower on it (2 % of the peak drive here)
+    thin, thick = e.effective_drive(step, t_p), e.effective_drive(step, t_p * 1.05)
+    assert np.max(np.abs(thin - thick)) > 0.01 * np.max(np.abs(thin))
+    assert e.effective_drive({}, t_p).tolist() == e.effective_drive({}, t_p * 1.05).tolist()
+
+
 @pytest.mark.slow
 def test_a_null_stays_null_on_another_labs_data(null_lab):
     d = diagnose(load_gap_data(null_lab))
