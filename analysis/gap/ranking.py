@@ -17,8 +17,8 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import (AddEach, GridObjectives, add_each_here, grid_objectives_here, n_params,
-                                    overdispersion, threshold)
+from analysis.gap.screening import (AddEach, GridObjectives, add_each_here, grid_objectives_here, improvement,
+                                    n_params, overdispersion, threshold)
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -68,7 +68,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         rows = []
         for name, f in tried.items():
             ho = judge.heldout(f)
-            rows.append(StepCandidate(name, current.objective - f.objective, ho, judge.reduction_ci(current, f),
+            rows.append(StepCandidate(name, improvement(current, f, scale2), ho, judge.reduction_ci(current, f),
                                       float(f.effects[name].strength)))
         rows.sort(key=lambda c: c.heldout.rms)
         # each candidate against its own gate: one with many parameters (the drift spline) that fails it must not

@@ -16,7 +16,7 @@ class Screened:
     name: str
     strength: float
     shapes: dict[str, float]
-    improvement: float            # objective(nominal) - objective(with it), noise units^2
+    improvement: float            # objective(nominal) - objective(with it), noise units^2 (`screening.improvement`)
     threshold: float              # the likelihood-ratio threshold it had to pass (over-dispersion included)
     promising: bool
     start: dict[tuple, float] = field(repr=False, default_factory=dict)
@@ -43,7 +43,7 @@ class StepCandidate:
     """One candidate tried at a step of the forward selection (added to the effects named so far)."""
 
     name: str
-    improvement: float            # in-sample objective decrease over the step's base model
+    improvement: float            # in-sample objective decrease over the step's base model (`screening.improvement`)
     heldout: HeldOut
     reduction_ci95: tuple[float, float]   # of the held-out RMS relative to the base model
     strength: float
