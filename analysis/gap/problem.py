@@ -28,8 +28,9 @@ from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import GapData
 
-# Effects that read the field across a plate: with one of them, each specimen's plate thickness is fitted (under
-# its tolerance) where its voltage lands on the curve, as a sharp change in field shows it, beside the two gains.
+# Effects that read the field across a plate: with one of them, the plate thickness of each specimen of a batch is
+# fitted (under its tolerance): it sets where its voltage lands on the curve, which a sharp change in field shows
+# and the two gains cannot follow.
 FIELD_EFFECTS = ("field_dependent_d31",)
 PLATE_BOUND = 0.2        # log plate thickness, +-5 tolerance sigmas
 LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
@@ -103,6 +104,11 @@ class Fit:
         return self.residual[:self.layout.n_rows]
 
     @property
+    def n_gain_prior_rows(self) -> int:
+        """The prior rows of the specimens' gains come first after the data rows, two per specimen group."""
+        return sum(1 for q in self.layout.params if q.kind == "gain")
+
+    @property
     def chi2_rows(self) -> float:
         z = self.z
         return float(z @ z)
@@ -151,6 +157,12 @@ class Problem:
         self.gain_whitening = {g: tol.whitening(e.actuator) for g, e in self.group_engine.items()}
         # specimens of one actuator type (layer count) share a batch: a fabrication shift moves them together
         self.group_type = {g: e.run.layers for g, e in self.group_engine.items()}
+        # specimens whose plate thickness is fitted with a field-dependent effect: those of a batch (a layer count
+        # with two or more specimens), where plates cut from one sheet still differ by its thickness scatter; a
+        # lone specimen keeps the nominal plates (its offset trades with the knee, and each plate parameter costs
+        # the Jacobian a pass through every drive)
+        self.plate_groups = [g for g in self.groups
+                             if sum(t == self.group_type[g] for t in self.group_type.values()) >= 2]
         self._cache: list[OrderedDict] = [OrderedDict() for _ in self.engines]
         self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
         self.ramp_rates = self._ramp_rates()
@@ -215,7 +227,7 @@ class Problem:
                                     shape.default))
         params += self._nuisance_params()
         if any(n in FIELD_EFFECTS for n in names):
-            params += [Param("plate", (g,), -PLATE_BOUND, PLATE_BOUND, 0.02, 0.0) for g in self.groups]
+            params += [Param("plate", (g,), -PLATE_BOUND, PLATE_BOUND, 0.02, 0.0) for g in self.plate_groups]
         if "sensor_drift" in names:
             for k in range(len(self.engines)):
                 for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default

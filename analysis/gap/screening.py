@@ -113,12 +113,17 @@ def overdispersion(p: Problem, fit: Fit, n_extra: int = 0) -> float:
 
 
 def improvement(before: Fit, after: Fit, scale2: float) -> float:
-    """The objective's decrease, its prior rows' part weighted by the over-dispersion so that only the data rows'
-    part is diluted by it when compared with a threshold x over-dispersion: a model's misfit inflates the scatter
-    of the data rows, not the tolerance prior (a common fabrication shift shows there, in the specimens' gains)."""
-    data = before.chi2_rows - after.chi2_rows
-    prior = (before.objective - before.chi2_rows) - (after.objective - after.chi2_rows)
-    return data + scale2 * prior
+    """The objective's decrease, the specimen gains' prior rows weighted by the over-dispersion, so that when it is
+    compared with a threshold x over-dispersion only the rest is diluted by it: a model's misfit inflates the
+    scatter of the data rows, not the tolerance prior, and a fabrication shift common to the specimens shows
+    there, in their gains. (The shapes' priors and the drift spline's smoothness are regularisers of the fit and
+    count as the data do.)"""
+    def gain_prior(f: Fit) -> float:
+        rows = f.residual[f.layout.n_rows:f.layout.n_rows + f.n_gain_prior_rows]
+        return float(rows @ rows)
+
+    g = gain_prior(before) - gain_prior(after)
+    return (before.objective - after.objective) - g + scale2 * g
 
 
 def threshold(p: Problem, name: str, scale2: float, n_candidates: int) -> float:
