@@ -126,16 +126,16 @@ def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s
     return tol.common_shift_sigmas(actuator, whitening, n, name, s) - DETECTION_SIGMAS
 
 
-def specimen_table(p: Problem, fit: Fit) -> dict[str, dict[str, float]]:
-    """Each specimen's fitted deviation from the presets (free stroke and stiffness, %), its prior score, and,
-    where a field-dependent effect was fitted, its plates' thickness against the nominal."""
+def specimen_table(p: Problem, fit: Fit, final: Fit | None = None) -> dict[str, dict[str, float]]:
+    """Each specimen's fitted deviation from the presets in `fit` (free stroke and stiffness, %) and its prior
+    score, and, where the `final` fit holds a field-dependent effect, its plates' thickness against the nominal."""
     out = {}
     for g in p.groups:
         a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
         score = float(np.linalg.norm(_whitened_gains(p, fit, g)))
         out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
-        if ("plate", g) in fit.layout.index:
-            out[g]["plate_thickness_change"] = math.expm1(fit.value("plate", g))
+        if final is not None and ("plate", g) in final.layout.index:
+            out[g]["plate_thickness_change"] = math.expm1(final.value("plate", g))
     return out
 
 
@@ -165,7 +165,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                    "closed_fraction": last.closed_fraction}
     lags = {"/".join(q.key): final.value("lag", *q.key) for q in final.layout.params if q.kind == "lag"}
     diag = Diagnosis(where=where, gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
-                     specimens=specimen_table(p, nominal), screening=screened, waterfall=sel.steps, named=named,
+                     specimens=specimen_table(p, nominal, final), screening=screened, waterfall=sel.steps, named=named,
                      best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
