@@ -210,7 +210,7 @@ class RunEngine:
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
         self._memory: list[np.ndarray] | None = None
-        self._log_plates: list[np.ndarray] | None = None
+        self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
@@ -259,10 +259,15 @@ class RunEngine:
         knee = 10.0 ** d31.shape("log10_knee_V_per_um", "field_dependent_d31")
         p = d31.shape("steepness", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
-        if self._log_plates is None:   # the plates' voltages are the run's: their logs are computed once
-            self._log_plates = [op.log_magnitude(v) for v in (vd, vb - vd)]
-        return np.stack([op.plate_gain(v, t_p, d31.strength, knee, p, ref, log_v)
-                         for v, log_v in zip((vd, vb - vd), self._log_plates, strict=True)])
+        if self._plate_levels is None:
+            # the plates' voltages are the run's, and a staircase holds few distinct ones (~1 in 12 samples): the
+            # gain is computed on those (with their logs, once) and spread back
+            self._plate_levels = []
+            for v in (vd, vb - vd):
+                levels, where = np.unique(v, return_inverse=True)
+                self._plate_levels.append((levels, op.log_magnitude(levels), where))
+        return np.stack([op.plate_gain(levels, t_p, d31.strength, knee, p, ref, log_v)[where]
+                         for levels, log_v, where in self._plate_levels])
 
     def _plate_memory(self) -> list[np.ndarray]:
         """Each plate's play memory (`operators.plate_memory`): it depends on the drive alone, so it is computed

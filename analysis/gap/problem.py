@@ -1,8 +1,8 @@
 """The joint fit every stage of the diagnosis stands on: observed phase rows with their pure-error noise, the
 nominal model with each SPECIMEN's gains under the tolerance prior (a random effect, `tolerances.py`), each
-SESSION's contact shift, each sensor chain's lag (with an effect that reads the field, each specimen's plate
-thickness), and any set of candidate effects (strength and shape
-parameters, shapes under weak priors), solved as one bounded nonlinear least-squares problem.
+SESSION's contact shift, each sensor chain's lag (with an effect that reads the field, each batch specimen's
+plate thickness), and any set of candidate effects (strength and shape parameters, shapes under weak priors),
+solved as one bounded nonlinear least-squares problem.
 
 The objective is the sum of squared residuals in noise units, z = (measured - model) / standard error, plus the
 prior rows (specimen gains whitened by their tolerance covariance, shapes, the drift spline's smoothness). Every
@@ -216,6 +216,16 @@ class Problem:
     # --- layout ----------------------------------------------------------------------------------------------
     def layout(self, names: tuple[str, ...] | list[str]) -> Layout:
         names = tuple(names)
+        params = self.params_of(names)
+        index = {(p.kind,) + p.key: i for i, p in enumerate(params)}
+        n_prior = self._n_prior(names, params)
+        lay = Layout(names, params, index, self.y.size, n_prior)
+        lay.sparsity = self._sparsity(lay)
+        return lay
+
+    def params_of(self, names: tuple[str, ...]) -> list[Param]:
+        """The parameters of a model naming `names`: each effect's strength and shapes, every nuisance, and what an
+        effect brings with it (the plates' thickness with a field-dependent one, the drift's coefficients)."""
         params: list[Param] = []
         for n in names:
             f = FAMILIES[n]
@@ -233,11 +243,7 @@ class Problem:
                 for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default
                                                   ).shape[1]):
                     params.append(Param("drift", (k, j), -1.0, 1.0, 1e-3, 0.0))
-        index = {(p.kind,) + p.key: i for i, p in enumerate(params)}
-        n_prior = self._n_prior(names, params)
-        lay = Layout(names, params, index, self.y.size, n_prior)
-        lay.sparsity = self._sparsity(lay)
-        return lay
+        return params
 
     def _nuisance_params(self) -> list[Param]:
         """What every model carries whatever effects it names: per specimen group its two log gains, per session

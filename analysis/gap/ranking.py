@@ -18,7 +18,7 @@ from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
 from analysis.gap.screening import (AddEach, GridObjectives, add_each_here, grid_objectives_here, improvement,
-                                    n_params, overdispersion, threshold)
+                                    overdispersion, threshold)
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -73,8 +73,8 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         rows.sort(key=lambda c: c.heldout.rms)
         # each candidate against its own gate: one with many parameters (the drift spline) that fails it must not
         # hide one with few that passes
-        passing = [c for c in rows if c.reduction_ci95[0] > 0 and c.improvement > scale2 * float(
-            stats.chi2.ppf(1 - STEP_ALPHA / max(len(pool), 1), n_params(p, c.name)))]
+        passing = [c for c in rows if c.reduction_ci95[0] > 0
+                   and c.improvement > threshold(p, c.name, scale2, len(pool), STEP_ALPHA)]
         if not passing:
             rejected = rows
             break

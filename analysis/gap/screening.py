@@ -104,7 +104,7 @@ def prior_strength(p: Problem, base: Fit, name: str) -> float:
 def n_params(p: Problem, name: str) -> int:
     """Free parameters a candidate adds: its strength and shapes (the drift: its baseline coefficients; an effect
     that reads the field: each specimen's plate thickness too)."""
-    return max(1, len(p.layout((name,)).params) - len(p.layout(()).params))
+    return max(1, len(p.params_of((name,))) - len(p.params_of(())))
 
 
 def overdispersion(p: Problem, fit: Fit, n_extra: int = 0) -> float:
@@ -126,8 +126,9 @@ def improvement(before: Fit, after: Fit, scale2: float) -> float:
     return (before.objective - after.objective) - g + scale2 * g
 
 
-def threshold(p: Problem, name: str, scale2: float, n_candidates: int) -> float:
-    return float(stats.chi2.ppf(1 - SCREEN_ALPHA / max(n_candidates, 1), n_params(p, name))) * scale2
+def threshold(p: Problem, name: str, scale2: float, n_candidates: int, alpha: float = SCREEN_ALPHA) -> float:
+    """The likelihood-ratio test's bar for candidate `name` among n_candidates (Bonferroni), x over-dispersion."""
+    return float(stats.chi2.ppf(1 - alpha / max(n_candidates, 1), n_params(p, name))) * scale2
 
 
 AddEach = Callable[[Fit, Sequence[str], int], dict[str, Fit]]
