@@ -30,6 +30,7 @@ from hamr_bench.errors import HamrBenchError
 from hamr_bench.model import ActuatorParams, DesignParams, Powertrain, actuator_preset, design_preset
 from hamr_bench.model import actuator as act
 from hamr_bench.model.effects import Effect
+from hamr_bench.model.powertrain import HeldFoot
 from hamr_bench.recording.steps import INFERRED, INFERRED_RAMP_DT_S
 
 FULL_SCALE_V = 250.0
@@ -213,6 +214,7 @@ class RunEngine:
         self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
+        self._held: dict[tuple, HeldFoot] = {}
         self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
@@ -404,10 +406,10 @@ class RunEngine:
                 f = op.spring_solve_many(f0, k, self._springs(effects))
                 out[is_force] = f if self.reads_pull else np.maximum(f, 0.0)
             return out
-        return self._leg_values(a, effects, y, te, is_force, nuis, b)
+        return self._leg_values(a, effects, y, te, is_force, nuis, b, (times, lags))
 
     def _leg_values(self, a: ActuatorParams, effects: Effects, y: np.ndarray, te: np.ndarray, is_force: np.ndarray,
-                    nuis: RunNuisance, backlash_m: float) -> np.ndarray:
+                    nuis: RunNuisance, backlash_m: float, times_key: tuple) -> np.ndarray:
         d = self.design
         assert d is not None  # a leg run always has its design (RunEngine reads it from the recording)
         bias = effects.get("bias_error")
@@ -428,12 +430,25 @@ class RunEngine:
             out[m] = -np.interp(half[m], FREE_HEIGHT_GRID_V, table)
         if is_force.any():
             h = self.surface_at(te[is_force], backlash_m) + nuis.shift_m
-            f = p.foot_force_N(zero[is_force], half[is_force], h)
+            u = p.free_actuator_deflection_m(zero[is_force], half[is_force])
+            # the heights change with the lags, the shift and the backlash only: a Jacobian's columns for the gains'
+            # stroke and every drive effect reuse the linkage's trigonometry at them
+            where = (p.held_foot_key, times_key, backlash_m, nuis.shift_m)
+
+            def held(offset_m: float) -> HeldFoot:
+                key = where + (offset_m,)
+                out = self._held.get(key)
+                if out is None:
+                    out = p.hold_foot(h + offset_m)
+                    _keep(self._held, key, out)
+                return out
+
+            f = p.force_on_held_foot(held(0.0), u)
             sensor = effects.get("sensor_compliance")
             if sensor is not None and sensor.strength != 0:
+                # the sensor gives way under the force, so the foot sits lower: F = F(h - C F), F(h) / (1 + C dF/dh)
                 dh = 2e-6
-                kc = (p.foot_force_N(zero[is_force], half[is_force], h - dh)
-                      - p.foot_force_N(zero[is_force], half[is_force], h + dh)) / (2 * dh)
+                kc = (p.force_on_held_foot(held(dh), u) - p.force_on_held_foot(held(-dh), u)) / (2 * dh)
                 f = f / (1.0 + sensor.strength * np.maximum(np.nan_to_num(kc), 0.0))
             f = np.nan_to_num(f)
             out[is_force] = f if self.reads_pull else np.maximum(f, 0.0)

@@ -26,6 +26,7 @@ on a coarse grid across the linkage's range, the stable crossing (G from - to +)
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -66,6 +67,29 @@ def _closing_range(g: tr.SliderCrankGeometry, coupler_m: float) -> tuple[float, 
     lo = int(bad[bad < i0].max()) + 1 if np.any(bad < i0) else 0
     hi = int(bad[bad > i0].min()) - 1 if np.any(bad > i0) else th.size - 1
     return float(th[lo]), float(th[hi])
+
+
+@dataclass(frozen=True)
+class ThetaTerms:
+    """What G(theta) needs from the crank angle alone (flex1, flex2: the first two flexures' torques; None for a
+    linkage without flexure stiffness)."""
+
+    delta: np.ndarray
+    ddelta: np.ndarray
+    phi3: np.ndarray
+    flex1: np.ndarray | None
+    flex2: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class HeldFoot:
+    """A powertrain's linkage with the foot held at given heights (`Powertrain.hold_foot`): which heights the
+    linkage reaches, the crank angles (the neutral where it does not), their G terms and dh/dtheta."""
+
+    inside: np.ndarray
+    theta_rad: np.ndarray
+    terms: ThetaTerms
+    dheight: np.ndarray
 
 
 class Powertrain:
@@ -224,8 +248,9 @@ class Powertrain:
                              f"at theta_fab (coupler_m={c:.6g}, crank_m={g.crank_m:.6g}, offset_m={g.offset_m:.6g})")
         return span
 
-    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
-        """U'(theta) - load h'(theta), one fused pass (same equations as transmission.py, constants cached)."""
+    def _theta_terms(self, th: np.ndarray) -> ThetaTerms:
+        """The factors of G that depend on the crank angle alone: the transmission input, its derivative and the
+        flexures' torques (same equations as transmission.py, constants cached; one pass of the trigonometry)."""
         g = self.geometry
         r, e, l = g.crank_m, g.offset_m, self.coupler_m
         sn, cs = np.sin(th), np.cos(th)
@@ -234,14 +259,29 @@ class Powertrain:
         delta = self._x_ref - r * cs - q
         ddelta = r * sn + s * r * cs / q
         phi3 = th - g.theta_fab_rad
+        if not self._has_flex:
+            return ThetaTerms(delta, ddelta, phi3, None, None)
+        dpsi = -r * cs / q
+        phi1 = -np.arcsin(s / l) - self._psi_fab
+        k1, k2, _ = self.kappa
+        return ThetaTerms(delta, ddelta, phi3, k1 * phi1 * dpsi, k2 * (phi3 - phi1) * (1.0 - dpsi))
+
+    def _G_of(self, terms: ThetaTerms, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
+        """U'(theta) - load h'(theta) from the angle's terms and the drive's free deflection u."""
+        g = self.geometry
+        delta, ddelta, phi3 = terms.delta, terms.ddelta, terms.phi3
         chain = self.k_eff_N_per_m * (u - delta) if self.serial_chain is None else self.serial_chain.force_N(u - delta)
-        out = load * g.leg_length_m * np.cos(g.leg_angle0_rad + phi3) - chain * ddelta
-        if self._has_flex:
-            dpsi = -r * cs / q
-            phi1 = -np.arcsin(s / l) - self._psi_fab
-            k1, k2, k3 = self.kappa
-            out = out + k1 * phi1 * dpsi + k2 * (phi3 - phi1) * (1.0 - dpsi) + (k3 + self.k_swing_coupled) * phi3
+        if isinstance(load, float) and load == 0.0:
+            out = -(chain * ddelta)
+        else:
+            out = load * g.leg_length_m * np.cos(g.leg_angle0_rad + phi3) - chain * ddelta
+        if terms.flex1 is not None:
+            out = out + terms.flex1 + terms.flex2 + (self.kappa[2] + self.k_swing_coupled) * phi3
         return out
+
+    def _G(self, th: np.ndarray, u: np.ndarray, load: np.ndarray | float) -> np.ndarray:
+        """U'(theta) - load h'(theta), one fused pass."""
+        return self._G_of(self._theta_terms(th), u, load)
 
     def _solve(self, u_m: np.ndarray, load_N: np.ndarray, theta_start: float, stops: bool = False) -> np.ndarray:
         """Stable root of U'(theta) - load h'(theta) nearest theta_start, vectorised; nan where none exists.
@@ -311,13 +351,29 @@ class Powertrain:
         `foot_sliding` (contact.py: +1 pressing down, -1 pushed up by the support); frictionless by default.
         """
         u = self.free_actuator_deflection_m(v_bias_V, v_drive_V)
+        return self.force_on_held_foot(self.hold_foot(foot_height_m), u, friction_mu, foot_sliding)
+
+    @property
+    def held_foot_key(self) -> tuple:
+        """Everything a `HeldFoot` of this powertrain depends on: powertrains with equal keys share them (a fit
+        that changes only the drive evaluates the linkage at the same heights again)."""
+        return (self.geometry, self.coupler_m, tuple(self.kappa.tolist()), self._has_flex, self._h_neutral_fab,
+                self.theta_neutral_rad)
+
+    def hold_foot(self, foot_height_m: ArrayLike) -> HeldFoot:
+        """The linkage with its foot held at these heights: every factor of the support force but the drive."""
         th = self.theta_at_height(foot_height_m)
         inside = (th >= self._theta_lo) & (th <= self._theta_hi)
         th_safe = np.where(inside, th, self.theta_neutral_rad)
-        f = self._G(th_safe, u, 0.0) / tr.dfoot_height_dtheta(self.geometry, th_safe)
+        return HeldFoot(inside, th_safe, self._theta_terms(th_safe), tr.dfoot_height_dtheta(self.geometry, th_safe))
+
+    def force_on_held_foot(self, held: HeldFoot, u_m: ArrayLike, friction_mu: ArrayLike = 0.0,
+                           foot_sliding: ArrayLike = PRESSING) -> np.ndarray:
+        """`foot_force_N` for a free actuator deflection u at heights already held (`hold_foot`)."""
+        f = self._G_of(held.terms, np.asarray(u_m, float), 0.0) / held.dheight
         if np.any(np.asarray(friction_mu) != 0):
-            f = f * friction_reading_ratio(self.leg_angle_rad(th_safe), friction_mu, foot_sliding)
-        return self._out(np.where(inside, f, np.nan))
+            f = f * friction_reading_ratio(self.leg_angle_rad(held.theta_rad), friction_mu, foot_sliding)
+        return self._out(np.where(held.inside, f, np.nan))
 
     def blocked_force_N(self, voltage_V: ArrayLike, sag_m: ArrayLike = 0.0, friction_mu: ArrayLike = 0.0,
                         foot_sliding: ArrayLike = PRESSING) -> np.ndarray:
