@@ -10,6 +10,8 @@ import json
 import os
 from pathlib import Path
 
+from analysis.gap.results import closed_share_text
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("gap", help="sim-to-real gap diagnosis: where, which effect, how far it closes")
@@ -65,7 +67,7 @@ def format_text(result: dict) -> str:
     for e in result["named"]:
         ci = e["strength_ci95"]
         lines.append(f"  {e['effect']:22s} {e['verdict']:16s} strength {e['strength']:.4g} [{ci[0]:.4g}, {ci[1]:.4g}] "
-                     f"{e['unit']}; closes {e['closed_fraction']:.0%} of the held-out gap"
+                     f"{e['unit']}; closes {closed_share_text(e['closed_fraction'], ' of the held-out gap')}"
                      + (f"; confusable with {', '.join(e['confusable_with'])}" if e["confusable_with"] else ""))
     if not result["named"]:
         lines.append("  none")

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from analysis.gap.results import closed_share_text
+
 
 def _group_label(problem, i: int) -> str:
     r = problem.rows[i]
@@ -160,7 +162,7 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
         ci = e["strength_ci95"]
         lines.append(f"| {e['effect']} | {e['verdict']} | {e['strength']:.3g} [{ci[0]:.3g}, {ci[1]:.3g}] "
                      f"{e['unit']} | {e['heldout_rms_before']:.2f} -> {e['heldout_rms_after']:.2f} | "
-                     f"{e['closed_fraction']:.0%} | {', '.join(e['confusable_with']) or '-'} |")
+                     f"{closed_share_text(e['closed_fraction'])} | {', '.join(e['confusable_with']) or '-'} |")
     if not result["named"]:
         lines.append("| none | | | | | |")
     for c in result["cannot_separate"]:

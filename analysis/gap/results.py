@@ -147,3 +147,14 @@ class Diagnosis:
                 "heldout_units": "noise units (z = residual / pure-error standard error; for a specimen left "
                                  "out, / its predictive spread); 1 = the noise floor",
                 "recordings": self.recordings, "elapsed_s": self.elapsed_s}
+
+
+def closed_share_text(fraction: float | None, of: str = "") -> str:
+    """A step's share of the nominal held-out gap above the noise floor, for people (`of`: what it is a share of,
+    e.g. " of the held-out gap"). Past 100 % the step took the held-out gap below the floor (the share's
+    denominator is the gap above it): that reads as all of it."""
+    if fraction is None:
+        return "-"
+    if fraction >= 1.0:
+        return f"all{of}, to below the noise floor"
+    return f"{fraction:.0%}{of}"
