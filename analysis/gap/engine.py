@@ -437,11 +437,11 @@ class RunEngine:
 
             def held(offset_m: float) -> HeldFoot:
                 key = where + (offset_m,)
-                out = self._held.get(key)
-                if out is None:
-                    out = p.hold_foot(h + offset_m)
-                    _keep(self._held, key, out)
-                return out
+                pose = self._held.get(key)
+                if pose is None:
+                    pose = p.hold_foot(h + offset_m)
+                    _keep(self._held, key, pose)
+                return pose
 
             f = p.force_on_held_foot(held(0.0), u)
             sensor = effects.get("sensor_compliance")

@@ -60,6 +60,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         again = _looked_again(p, current, screened, set(pool) | spent, grid_objectives) \
             if current is not nominal else []
         tried: dict[str, Fit] = {}
+        judged: dict[str, tuple[HeldOut, tuple[float, float]]] = {}
         # the promising candidates in batches of MAX_TRIED (by screening improvement) until one passes: the largest
         # in-sample improvements can all fail held out (a spring or a d31 curve fitting what a fabrication shift
         # causes), and the candidates behind them must still be tried
@@ -69,7 +70,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
                      and screen_fits[n].extra.get("converged")}
             fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40)
             tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
-            rows, passing, scale2 = _judged(p, current, tried, judge, len(pool))
+            rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
             if passing:
                 break
         if not passing:
@@ -87,16 +88,20 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     return Selection(steps, fits, alternatives, rejected)
 
 
-def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge,
-            n_pool: int) -> tuple[list[StepCandidate], list[StepCandidate], float]:
+def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge, n_pool: int,
+            judged: dict[str, tuple[HeldOut, tuple[float, float]]]) -> tuple[list[StepCandidate],
+                                                                               list[StepCandidate], float]:
     """Every candidate tried at a step, by held-out gap, and those that pass: each against its own gate (one with
-    many parameters, the drift spline, that fails it must not hide one with few that passes)."""
+    many parameters, the drift spline, that fails it must not hide one with few that passes). `judged` keeps each
+    fit's held-out bootstraps across a step's batches; only the improvement depends on the batch (through the
+    over-dispersion of the best fit tried so far)."""
     scale2 = overdispersion(p, min(tried.values(), key=lambda f: f.objective), 0)
     rows = []
     for name, f in tried.items():
-        ho = judge.heldout(f)
-        rows.append(StepCandidate(name, improvement(current, f, scale2), ho, judge.reduction_ci(current, f),
-                                  float(f.effects[name].strength)))
+        if name not in judged:
+            judged[name] = (judge.heldout(f), judge.reduction_ci(current, f))
+        ho, ci = judged[name]
+        rows.append(StepCandidate(name, improvement(current, f, scale2), ho, ci, float(f.effects[name].strength)))
     rows.sort(key=lambda c: c.heldout.rms)
     passing = [c for c in rows if c.reduction_ci95[0] > 0
                and c.improvement > threshold(p, c.name, scale2, n_pool, STEP_ALPHA)]
