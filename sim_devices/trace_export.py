@@ -46,7 +46,7 @@ def record_specimens(scenario: Scenario, out_dir: Path, set_options: list[str] |
         path = out_dir / f"actuator-specimen{specimen.label}.mcap"
         result = run_protocol(RunRequest(protocol="actuator", out=path, rig_path=rig, layers=scenario.layers,
                                          design=scenario.design, seed=seed * 1000 + k, overwrite=True,
-                                         set_options=list(set_options or [])))
+                                         set_options=list(set_options or []), specimen=specimen.label))
         if not result.ok:
             raise RuntimeError(f"specimen {specimen.label}: the simulated run ended {result.exit_status} "
                                f"({result.reason})")

@@ -51,9 +51,10 @@ def load_params(path: Path | None) -> dict | None:
 def format_text(result: dict) -> str:
     """The JSON result (`Diagnosis.to_json`) as a few lines for a terminal."""
     lack = result["nominal_lack_of_fit"]
-    lines = [f"gap above noise: {'yes' if result['gap_above_noise'] else 'no'} (lack-of-fit p = {lack['p_value']:.3g}, "
-             f"RMS gap {lack['z_rms']:.2f} x noise, after fitting each specimen within its tolerances)", "",
-             "where (largest first):"]
+    lines = [f"note: {n}" for n in result.get("notes", [])]
+    lines += [f"gap above noise: {'yes' if result['gap_above_noise'] else 'no'} (lack-of-fit p = "
+              f"{lack['p_value']:.3g}, RMS gap {lack['z_rms']:.2f} x noise, after fitting each specimen within its "
+              "tolerances)", "", "where (largest first):"]
     for g in result["where"][:8]:
         lines.append(f"  {g['protocol']:18s} {g['condition']:40s} gap {g['rms_gap']:.3g} vs noise "
                      f"{g['noise_floor']:.3g} ({g['quantity']}), p = {g['p_value']:.2g}")
@@ -97,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     diagnosis = diagnose(data, params, names, seed=args.seed, jobs=jobs)
     out = diagnosis.to_json()
     out["nominal_source"] = f"fit {args.params}" if args.params else "the presets the recordings name"
+    out["notes"] = data.specimen_notes()
     if args.report:
         from analysis.gap.report import write_report
 

@@ -146,6 +146,18 @@ class GapData:
         """Per run, `RunTrace.provenance()`: for `gap --json` and the report."""
         return [run.provenance() for run in self.runs]
 
+    def specimen_notes(self) -> list[str]:
+        """One line per fixture whose runs come from several recordings that name no specimen: those runs share
+        one specimen's gains, which is right for one specimen measured again and wrong for several."""
+        unlabelled: dict[str, set[str]] = {}
+        for run in self.runs:
+            if not run.specimen:
+                what = f"{run.layers}-layer actuator" if run.fixture == "actuator" else f"design {run.design} leg"
+                unlabelled.setdefault(what, set()).add(run.path)
+        return [f"{len(paths)} {what} recordings name no specimen and are treated as one specimen; if they hold "
+                f"different specimens, label them (`hamr-bench run --specimen LABEL`, or a `specimen` column in an "
+                f"imported trace)" for what, paths in sorted(unlabelled.items()) if len(paths) > 1]
+
 
 def _samples_in(t: np.ndarray, a: float, b: float) -> np.ndarray:
     """The sensor's own sample times inside [a, b]: the model is evaluated exactly where the sensor was read."""

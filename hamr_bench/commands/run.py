@@ -65,8 +65,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="simulated bench only: inject a fault at T s of simulated time, e.g. "
                         "stage:following_error@20 (devices: stage, force_sensor, daq, camera)")
     parser.add_argument("--out", type=Path, required=True, metavar="RUN.mcap")
+    parser.add_argument("--specimen", default="", metavar="LABEL",
+                        help="label of the mounted specimen, written into every step (`gap` and `fit` treat "
+                        "recordings with different labels as different specimens; unlabelled ones as one)")
     add_run_options(parser)
     parser.set_defaults(func=run)
+
+
+def specimen_label(text: str) -> str:
+    """`--specimen`: any label without line breaks (it is one field of every step event)."""
+    from hamr_bench.errors import ConfigError
+
+    label = text.strip()
+    if any(c in label for c in "\r\n\t"):
+        raise ConfigError(f"--specimen: expected a one-line label, got {text!r}")
+    return label
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
             layers=args.layers, effects=parse_effects(args.effects), seed=args.seed,
             protocol_file=args.protocol_file, set_options=args.set_options, overwrite=args.force,
             quiet=args.quiet, record_traffic=args.record_traffic, faults=args.faults,
-            camera_storage=camera_storage, live=view))
+            camera_storage=camera_storage, live=view, specimen=specimen_label(args.specimen)))
     if result.ok:
         if not args.quiet:
             print(f"{args.out}: {args.protocol} completed, {result.steps_done} steps")

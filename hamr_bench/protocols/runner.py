@@ -99,8 +99,11 @@ class AbortRequested(KeyboardInterrupt):
 class Runner:
     """Executes one plan on one rig into one recorder."""
 
-    def __init__(self, rig: Rig, recorder: Any, progress: Progress | None = None) -> None:
+    def __init__(self, rig: Rig, recorder: Any, progress: Progress | None = None, specimen: str = "") -> None:
         self.rig = rig
+        # the mounted specimen's label, carried by every step's condition (the readers make one specimen of the
+        # runs that name the same label, or none)
+        self.specimen = specimen
         self.rec = recorder
         self.clock = rig.clock
         self.progress = progress or NoProgress()
@@ -270,7 +273,8 @@ class Runner:
         if self.step_index >= 0:
             self.steps_done = self.step_index + 1
         self.step_index = msg.index
-        self.record_event(EventKind.STEP, message=msg.label, **msg.condition)
+        condition = {**msg.condition, "specimen": self.specimen} if self.specimen else msg.condition
+        self.record_event(EventKind.STEP, message=msg.label, **condition)
         self.progress.step(msg.index, msg.label)
 
     def _home(self, _msg: Home) -> None:

@@ -40,6 +40,7 @@ class RunRequest:
     params: Any = None  # already-built parameters (replay); overrides protocol_file/set_options
     camera_storage: Any = None  # a hamr_bench.recording.camera_storage.CameraStorage; None: the default (roi)
     live: Any = None  # a hamr_bench.live.session.LiveView that serves this run while it is recorded
+    specimen: str = ""  # the mounted specimen's label ('' names none)
 
 
 class TqdmProgress:
@@ -98,7 +99,7 @@ def run_protocol(req: RunRequest) -> RunResult:
     try:
         _write_metadata(recorder, req, protocol, params, rig)
         progress = None if req.quiet else TqdmProgress(protocol.step_count(params), protocol.NAME)
-        runner = Runner(rig, recorder, progress)
+        runner = Runner(rig, recorder, progress, specimen=req.specimen)
         if req.live is not None:
             req.live.follow(recorder, runner.request_abort)
         return runner.run(protocol, params)
