@@ -42,6 +42,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from analysis.gap.history import share_specimen_history
 from analysis.sessions import session_key
 from hamr_bench.errors import ConfigError, RecordingError
 from hamr_bench.recording.contract import EventKind, Topic
@@ -109,12 +110,15 @@ class RunTrace:
     source: str = "recorded"             # recorded | import-trace | import-points | ...
     contact: str = "none"                # search (contact_found event) | assumed (imported: zero sag at start) | none
     force_reads_pull: bool = False       # the force goes clearly negative: the sensor reads pull, no clip at 0
+    clock_offset_s: float = 0.0          # the importer's shift of this block (its file's time = ours - offset)
+    drive_history: str = "own"           # own | the runs whose timelines it shares (analysis.gap.history)
 
     def provenance(self) -> dict[str, Any]:
         """JSON-ready: where this run's data and timelines came from, and its grouping."""
         return {"run": self.index, "path": self.path, "specimen": self.specimen, "session": self.session,
                 "session_rule": self.session_rule, "source": self.source, "timelines": dict(self.timelines),
                 "contact": self.contact, "force_reads_pull": self.force_reads_pull,
+                "drive_history": self.drive_history,
                 "drive_timing": {str(k): v.summary() for k, v in sorted(self.step_timing.items())}}
 
 
@@ -330,7 +334,8 @@ def load_runs(path: Path | str, first_index: int = 0) -> list[RunTrace]:
             t_contact_s=t_contact, t_tare_s=tare[0] if tare else 0.0,
             t_end_s=float(parsed.events[-1].time_s) if parsed.events else 0.0,
             specimen=specimen, session=session, session_rule=rule, timelines=dict(timelines.sources),
-            source=meta.source, contact=contact_kind, force_reads_pull=reads_pull(force))
+            source=meta.source, contact=contact_kind, force_reads_pull=reads_pull(force),
+            clock_offset_s=_clock_offset(parsed.events, block))
         if len(blocks) > 1:
             run.t_end_s = block.end_s
         sensors = {"force_N": (tf, force), "displacement_m": (tc, disp)}
@@ -346,6 +351,14 @@ def load_runs(path: Path | str, first_index: int = 0) -> list[RunTrace]:
         _pool_standard_errors(run)
         out.append(run)
     return out
+
+
+def _clock_offset(events: list[Any], block: Any) -> float:
+    """The importer's time shift of a specimen block (0 for a native run or an unshifted block)."""
+    for e in events:
+        if e.kind == EventKind.SPECIMEN and abs(e.time_s - block.start_s) < 1e-9:
+            return float(e.data.get("time_offset_s", 0.0) or 0.0)
+    return 0.0
 
 
 def load_run(path: Path | str, index: int) -> RunTrace:
@@ -391,6 +404,7 @@ def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: 
         run.index = k
         for row in run.rows:
             row.run = k
+    share_specimen_history(runs)
     rows = [r for run in runs for r in run.rows]
     if not rows:
         raise RecordingError(f"{files[0]}: no driven or static steps to compare with the model")
