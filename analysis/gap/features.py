@@ -42,7 +42,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from analysis.gap.history import share_specimen_history
+from analysis.gap.history import history_notes, share_specimen_history
 from analysis.sessions import session_key
 from hamr_bench.errors import ConfigError, RecordingError
 from hamr_bench.recording.contract import EventKind, Topic
@@ -151,16 +151,18 @@ class GapData:
         return [run.provenance() for run in self.runs]
 
     def specimen_notes(self) -> list[str]:
-        """One line per fixture whose runs come from several recordings that name no specimen: those runs share
-        one specimen's gains, which is right for one specimen measured again and wrong for several."""
+        """One line per fixture whose runs come from several recordings that name no specimen (those runs share
+        one specimen's gains: right for one specimen measured again, wrong for several), and what the imported runs'
+        drive history is (`history.history_notes`)."""
         unlabelled: dict[str, set[str]] = {}
         for run in self.runs:
             if not run.specimen:
                 what = f"{run.layers}-layer actuator" if run.fixture == "actuator" else f"design {run.design} leg"
                 unlabelled.setdefault(what, set()).add(run.path)
-        return [f"{len(paths)} {what} recordings name no specimen and are treated as one specimen; if they hold "
-                f"different specimens, label them (`hamr-bench run --specimen LABEL`, or a `specimen` column in an "
-                f"imported trace)" for what, paths in sorted(unlabelled.items()) if len(paths) > 1]
+        notes = [f"{len(paths)} {what} recordings name no specimen and are treated as one specimen; if they hold "
+                 f"different specimens, label them (`hamr-bench run --specimen LABEL`, or a `specimen` column in an "
+                 f"imported trace)" for what, paths in sorted(unlabelled.items()) if len(paths) > 1]
+        return notes + history_notes(self.runs)
 
 
 def _samples_in(t: np.ndarray, a: float, b: float) -> np.ndarray:

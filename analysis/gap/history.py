@@ -93,3 +93,25 @@ def share_specimen_history(runs: list[Any]) -> None:
             run.bias_cmd = _from(bias, first, run.clock_offset_s)
             run.drive_cmd = _from(drive, first, run.clock_offset_s)
             run.drive_history = label
+
+
+def history_notes(runs: list[Any]) -> list[str]:
+    """One line on the imported, labelled specimens recorded in more than one file: how many were evaluated on a
+    shared drive history, and how many could not be (their files' clocks overlap)."""
+    counts: dict[tuple, int] = {}
+    shared: set[tuple] = set()
+    for run in runs:
+        if run.source.startswith("import") and run.specimen:
+            key = (run.specimen, run.fixture, run.layers, run.design)
+            counts[key] = counts.get(key, 0) + 1
+            if run.drive_history != "own":
+                shared.add(key)
+    several = [k for k, n in counts.items() if n > 1]
+    if not several:
+        return []
+    apart = len(several) - len(shared)
+    line = f"{len(shared)} of {len(several)} imported specimens recorded in several files share one drive history"
+    if apart:
+        line += (f"; {apart} do not (their files' times overlap, as when each file's clock restarts): each of their "
+                 f"files is evaluated as if nothing was driven before it")
+    return [line]

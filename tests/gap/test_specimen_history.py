@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from analysis.gap.engine import _zoh
-from analysis.gap.history import HISTORY_S, segments, share_specimen_history
+from analysis.gap.history import HISTORY_S, history_notes, segments, share_specimen_history
 
 
 def _run(index, segs, level, offset=0.0, specimen="1", source="import-trace"):
@@ -72,3 +72,14 @@ def test_segments_split_at_pauses():
     run = _run(0, [(0.0, 4.0), (20.0, 24.0)], 100.0)
     (a0, b0), (a1, b1) = segments(run)
     assert a0 == 0.0 and 3.9 < b0 <= 4.0 and a1 == 20.0 and 23.9 < b1 <= 24.0
+
+
+def test_the_notes_say_which_specimens_share_a_history():
+    shared = [_run(0, [(0.0, 4.0)], 100.0), _run(1, [(10.0, 14.0)], 250.0)]
+    apart = [_run(2, [(0.0, 4.0)], 100.0, specimen="2"), _run(3, [(1.0, 5.0)], 250.0, specimen="2")]
+    alone = [_run(4, [(0.0, 4.0)], 100.0, specimen="3")]
+    runs = shared + apart + alone
+    share_specimen_history(runs)
+    (line,) = history_notes(runs)
+    assert line.startswith("1 of 2 imported specimens recorded in several files share one drive history; 1 do not")
+    assert history_notes(alone) == []
