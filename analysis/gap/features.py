@@ -151,17 +151,20 @@ class GapData:
         return [run.provenance() for run in self.runs]
 
     def specimen_notes(self) -> list[str]:
-        """One line per fixture whose runs come from several recordings that name no specimen (those runs share
+        """One line per fixture and protocol whose runs come from several recordings that name no specimen (they share
         one specimen's gains: right for one specimen measured again, wrong for several), and what the imported runs'
         drive history is (`history.history_notes`)."""
-        unlabelled: dict[str, set[str]] = {}
+        unlabelled: dict[tuple[str, str], set[str]] = {}
         for run in self.runs:
+            # one protocol recorded more than once: a repeat or another specimen (several protocols on one
+            # fixture are the usual way to characterise one specimen, and need no note)
             if not run.specimen:
                 what = f"{run.layers}-layer actuator" if run.fixture == "actuator" else f"design {run.design} leg"
-                unlabelled.setdefault(what, set()).add(run.path)
-        notes = [f"{len(paths)} {what} recordings name no specimen and are treated as one specimen; if they hold "
-                 f"different specimens, label them (`hamr-bench run --specimen LABEL`, or a `specimen` column in an "
-                 f"imported trace)" for what, paths in sorted(unlabelled.items()) if len(paths) > 1]
+                unlabelled.setdefault((what, run.protocol), set()).add(run.path)
+        notes = [f"{len(paths)} {protocol} recordings of the {what} name no specimen and are treated as one "
+                 f"specimen; if they hold different specimens, label them (`hamr-bench run --specimen LABEL`, or a "
+                 f"`specimen` column in an imported trace)"
+                 for (what, protocol), paths in sorted(unlabelled.items()) if len(paths) > 1]
         return notes + history_notes(self.runs)
 
 

@@ -43,7 +43,7 @@ def test_labelled_recordings_are_separate_specimens(recordings):
 
 def test_unlabelled_recordings_from_several_files_are_pointed_out(recordings):
     (note,) = load_gap_data([recordings[""], recordings["again"], recordings["A7"]]).specimen_notes()
-    assert note.startswith("2 2-layer actuator recordings name no specimen")
+    assert note.startswith("2 actuator recordings of the 2-layer actuator name no specimen")
     assert "--specimen" in note
     assert load_gap_data([recordings[""]]).specimen_notes() == []
 
