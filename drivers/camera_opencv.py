@@ -126,6 +126,10 @@ class OpenCvCamera:
             )
         self._roi = (int(x), int(y), int(width), int(height))
 
+    def skip_to_live(self) -> None:
+        """Frames exposed while nobody grabbed are not drops: the next grab starts the gap count afresh."""
+        self._last_index = -1
+
     def grab(self) -> Frame:
         t_call = self._clock.now_s()
         ok, image = self._cap.read()

@@ -122,6 +122,10 @@ class PixelinkCamera:
         if was_streaming:
             self._stream(True)
 
+    def skip_to_live(self) -> None:
+        """Frames exposed while nobody grabbed are not drops: the next grab starts the gap count afresh."""
+        self._last_index = -1
+
     def grab(self) -> Frame:
         if not self._streaming:
             self._stream(True)

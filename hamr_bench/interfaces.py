@@ -134,7 +134,12 @@ class Camera(Protocol):
     def set_roi(self, x: int, y: int, width: int, height: int) -> None: ...
 
     def grab(self) -> Frame:
-        """The next frame, blocking until it is exposed."""
+        """The next frame, blocking until it is exposed. Frames the caller missed between two grabs are drops
+        (a gap wider than the driver allows is a DeviceFault)."""
+
+    def skip_to_live(self) -> None:
+        """The caller was away on purpose (between two tracked drives): the frames exposed since the last grab
+        are not drops, and gap counting starts again at the next grab."""
 
     def close(self) -> None: ...
 

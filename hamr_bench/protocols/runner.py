@@ -113,6 +113,7 @@ class Runner:
         self._streaming = False
         self._commanded = {"bias": 0.0, "drive": 0.0}
         self._stage_homed = False
+        self._tracking = False  # the last sampling pass grabbed camera frames
         self._next_stage_check_s = 0.0
         self._last_stage_m: float | None = None
         self._stage_query_s = 0.0
@@ -416,7 +417,13 @@ class Runner:
                 wake_times_s: Sequence[float] = ()) -> None:
         """Record every stream until the rig clock reaches `end_s` (at least one pass)."""
         written = 0
-        tracking = track and self.rig.camera is not None
+        camera = self.rig.camera if track else None
+        tracking = camera is not None
+        if camera is not None and not self._tracking:
+            # between tracked drives nobody grabs (bias ramps, stage moves): the camera's frames from then are
+            # not drops, however long a slow amplifier took
+            camera.skip_to_live()
+        self._tracking = tracking
         y0_px: float | None = None
         try:
             while True:

@@ -137,3 +137,17 @@ def test_real_videocapture_on_a_recorded_image_sequence(tmp_path: Path) -> None:
     assert [f.index for f in frames] == list(range(5))
     assert [int(f.image[0, 0]) for f in frames] == [0, 10, 20, 30, 40]
     camera.close()
+
+
+def test_a_pause_between_tracked_drives_is_not_a_drop() -> None:
+    clock, source, camera = sim()
+    camera.grab()
+    clock.sleep(0.5)                # ~30 frames at 60 Hz go by unread (a slow bias ramp)
+    with pytest.raises(DeviceFault, match="frames dropped"):
+        camera.grab()
+    clock.sleep(0.5)
+    camera.skip_to_live()
+    before = camera.dropped_frames
+    frames = [camera.grab() for _ in range(3)]
+    assert camera.dropped_frames == before
+    assert np.all(np.diff([f.index for f in frames]) == 1)

@@ -100,3 +100,12 @@ def test_settings_read_back_frames_indices_and_gaps(camera_env) -> None:
     with pytest.raises(DeviceTimeout):
         cam.grab()
     cam.close()
+
+
+def test_frames_missed_while_away_on_purpose_are_not_drops(camera_env) -> None:
+    PixelinkCamera, clock, fail = camera_env
+    cam = PixelinkCamera(clock, exposure_s=2e-3, frame_rate_Hz=30.0, roi=(0, 0, 8, 4))
+    assert [cam.grab().index for _ in range(3)] == [0, 1, 2]
+    cam.skip_to_live()              # frames 3-6 go by while the runner ramps the bias
+    assert cam.grab().index == 7 and cam.dropped_frames == 0
+    cam.close()

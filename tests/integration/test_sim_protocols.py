@@ -181,3 +181,20 @@ def test_sensor_compliance_in_series_with_the_actuator_tip(tmp_path, compliance_
         end = min(end, *moves[moves > start][:1])
         sel = (forces["time_s"] > start + 0.1) & (forces["time_s"] < end)
         assert np.mean(forces["force_N"][sel]) == pytest.approx(k_series * condition["sag_m"], abs=1.5e-3)
+
+
+def test_a_slow_amplifier_between_tracked_drives_does_not_fault_the_camera(tmp_path) -> None:
+    """At 500 V/s the bias takes 0.3 s from 100 V to 250 V between two free-displacement drives; the camera is not
+    read then, and those frames are not drops (at the default 60 Hz the driver faults on a gap of 4)."""
+    from sim_devices.sim_rig_file import sim_rig_text
+
+    text = sim_rig_text({})
+    assert "slew_rate_V_per_s = 10000.0" in text
+    rig = tmp_path / "slow-amplifier.toml"
+    rig.write_text(text.replace("slew_rate_V_per_s = 10000.0", "slew_rate_V_per_s = 500.0"), encoding="utf-8")
+    out = tmp_path / "slow.mcap"
+    result = run_protocol(RunRequest(protocol="actuator", out=out, rig_path=rig, set_options=[
+        *FAST, "repetitions=1", "voltages_V=100,250", "drive.cycles=1"]))
+    assert result.ok, result.reason
+    tracked = [e for e in RecordingReader(out).events() if e.kind == "drive_start" and e.data["track"]]
+    assert len(tracked) == 2
