@@ -1,5 +1,6 @@
 """The summary behind `hamr-bench info`: topics with counts, rates and time span, the metadata that matters at a
-glance (how the run ended, rig, design, protocol, software), and the result of the CRC check.
+glance (how the run ended, rig, design, protocol, software), the specimens its steps name, and the result of the
+CRC check.
 
 `summarise` returns plain JSON-able data (`--json` prints it as is); `format_summary` turns it into text.
 """
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from hamr_bench.errors import RecordingError
-from hamr_bench.recording.contract import MetadataName
+from hamr_bench.recording.contract import EventKind, MetadataName
 from hamr_bench.recording.reader import RecordingReader, RecordingWarning
 
 # Metadata keys shown in the text summary, per record; anything else is in --json.
@@ -67,6 +68,8 @@ def summarise(path: Path | str) -> dict[str, Any]:
             first_times.append(info.first_time_s)
             last_times.append(info.last_time_s)
     metadata = reader.metadata()
+    specimens = sorted({str(e.data["specimen"]) for e in reader.events()
+                        if e.kind in (EventKind.STEP, EventKind.SPECIMEN) and e.data.get("specimen")})
     return {
         "path": str(path),
         "size_bytes": status.file_size,
@@ -78,6 +81,7 @@ def summarise(path: Path | str) -> dict[str, Any]:
         "reason": reader.exit_reason,
         "start_time_utc": metadata.get(MetadataName.RECORDING, {}).get("start_time_utc"),
         "time_span_s": [min(first_times), max(last_times)] if first_times else None,
+        "specimens": specimens,
         "messages": sum(t["messages"] for t in topics),
         "topics": topics,
         "metadata": metadata,
@@ -100,6 +104,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     exit_status = summary["exit_status"] or "unknown (no run_end record: the writer did not finish)"
     reason = f" - {summary['reason']}" if summary.get("reason") else ""
     lines.append(f"exit status: {exit_status}{reason}")
+    if summary.get("specimens"):
+        lines.append(f"specimens: {', '.join(summary['specimens'])}")
     span = summary["time_span_s"]
     if span:
         lines.append(f"time span: {span[0]:.3f} s to {span[1]:.3f} s ({span[1] - span[0]:.3f} s) from run start "

@@ -9,6 +9,7 @@ import pytest
 from analysis.gap.features import load_gap_data
 from hamr_bench.cli import main
 from hamr_bench.recording import RecordingReader
+from hamr_bench.recording.info import format_summary, summarise
 
 QUICK = ["--set", "repetitions=1", "--set", "voltages_V=150", "--set", "drive.cycles=1", "--set", "drive.slow_ramp_s=0"]
 
@@ -33,6 +34,10 @@ def test_every_step_carries_the_label(recordings):
     assert steps and all(e.data["specimen"] == "A7" for e in steps)
     unlabelled = [e for e in RecordingReader(recordings[""]).events() if e.kind == "step"]
     assert unlabelled and all("specimen" not in e.data for e in unlabelled)
+    # `hamr-bench info` shows it
+    assert summarise(recordings["A7"])["specimens"] == ["A7"]
+    assert "specimens: A7" in format_summary(summarise(recordings["A7"]))
+    assert summarise(recordings[""])["specimens"] == []
 
 
 def test_labelled_recordings_are_separate_specimens(recordings):
