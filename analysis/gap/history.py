@@ -29,36 +29,44 @@ def segments(run: Any) -> list[tuple[float, float]]:
     samples included), split where nothing was recorded for SEGMENT_GAP_S."""
     parts = [run.drive_cmd[0]] + [r.eval_times_s for r in run.rows] \
         + [r.ref_times_s for r in run.rows if r.ref_times_s is not None]
-    t = np.unique(np.concatenate([np.asarray(p, float) for p in parts if len(p)])) if parts else np.empty(0)
-    if t.size == 0:
+    recorded = [np.asarray(p, float) for p in parts if len(p)]
+    if not recorded:
         return []
+    t = np.unique(np.concatenate(recorded))
     cut = np.flatnonzero(np.diff(t) > SEGMENT_GAP_S)
     starts = np.r_[0, cut + 1]
     ends = np.r_[cut, t.size - 1]
     return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
 
 
-def _shares_a_clock(runs: list[Any]) -> bool:
-    """True when no two runs' recorded segments overlap once each run's import shift is undone."""
-    spans = sorted((a - r.clock_offset_s, b - r.clock_offset_s, k) for k, r in enumerate(runs) for a, b in segments(r))
+def _specimen_key(run: Any) -> tuple | None:
+    """The specimen an imported, labelled run belongs to (None for a native or unlabelled one: its own history)."""
+    if run.source.startswith("import") and run.specimen:
+        return (run.specimen, run.fixture, run.layers, run.design)
+    return None
+
+
+def _shares_a_clock(runs: list[Any], segs: list[list[tuple[float, float]]]) -> bool:
+    """True when no two runs' recorded segments (`segs`, per run) overlap once each run's import shift is undone."""
+    spans = sorted((a - r.clock_offset_s, b - r.clock_offset_s, k)
+                   for k, (r, rs) in enumerate(zip(runs, segs, strict=True)) for a, b in rs)
     return all(nxt[0] > cur[1] or nxt[2] == cur[2] for cur, nxt in zip(spans, spans[1:], strict=False))
 
 
-def _merged(runs: list[Any], which: str) -> tuple[np.ndarray, np.ndarray]:
+def _merged(runs: list[Any], segs: list[list[tuple[float, float]]], which: str) -> tuple[np.ndarray, np.ndarray]:
     """The runs' timelines `which` in one staircase (undone shifts). Each run also restates its own level at the
     start of each of its segments: a level it held unchanged across a pause (one bias for both repetitions) is
     otherwise overwritten by the other runs recorded in that pause."""
     ts, vs = [], []
-    for r in runs:
+    for r, rs in zip(runs, segs, strict=True):
         t, v = (np.asarray(a, float) for a in getattr(r, which))
         if t.size == 0:
             continue
-        segs = segments(r)
-        starts = np.array([a for a, _ in segs])
+        starts = np.array([a for a, _ in rs])
         at = np.clip(np.searchsorted(t, starts, "right") - 1, 0, None)
         # a point outside every segment (a block's closing point) would hold into another run's segment
         inside = np.zeros(t.size, bool)
-        for a, b in segs:
+        for a, b in rs:
             inside |= (t >= a) & (t <= b)
         ts += [t[inside] - r.clock_offset_s, starts - r.clock_offset_s]
         vs += [v[inside], v[at]]
@@ -81,15 +89,17 @@ def share_specimen_history(runs: list[Any]) -> None:
     merged bias and drive timelines (in the run's own clock); `drive_history` says which runs it came from."""
     groups: dict[tuple, list[Any]] = {}
     for run in runs:
-        if run.source.startswith("import") and run.specimen:
-            groups.setdefault((run.specimen, run.fixture, run.layers, run.design), []).append(run)
+        key = _specimen_key(run)
+        if key is not None:
+            groups.setdefault(key, []).append(run)
     for members in groups.values():
-        if len(members) < 2 or not _shares_a_clock(members):
+        segs = [segments(r) for r in members]
+        if len(members) < 2 or not all(segs) or not _shares_a_clock(members, segs):
             continue
-        bias, drive = _merged(members, "bias_cmd"), _merged(members, "drive_cmd")
+        bias, drive = _merged(members, segs, "bias_cmd"), _merged(members, segs, "drive_cmd")
         label = f"specimen {members[0].specimen}: runs {', '.join(str(r.index) for r in members)}"
-        for run in members:
-            first = min(a for a, _ in segments(run)) - run.clock_offset_s - HISTORY_S
+        for run, rs in zip(members, segs, strict=True):
+            first = rs[0][0] - run.clock_offset_s - HISTORY_S
             run.bias_cmd = _from(bias, first, run.clock_offset_s)
             run.drive_cmd = _from(drive, first, run.clock_offset_s)
             run.drive_history = label
@@ -101,8 +111,8 @@ def history_notes(runs: list[Any]) -> list[str]:
     counts: dict[tuple, int] = {}
     shared: set[tuple] = set()
     for run in runs:
-        if run.source.startswith("import") and run.specimen:
-            key = (run.specimen, run.fixture, run.layers, run.design)
+        key = _specimen_key(run)
+        if key is not None:
             counts[key] = counts.get(key, 0) + 1
             if run.drive_history != "own":
                 shared.add(key)
