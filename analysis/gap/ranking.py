@@ -112,12 +112,16 @@ def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: s
                   grid_objectives: GridObjectives | None = None) -> list[str]:
     """Candidates the screening against the nominal fit turned down whose best strength on the coarse grid lowers
     the current fit's objective by more than the screening threshold: a large effect named first can hide a smaller
-    one from a fit started at the nominal model (its fit stopped short of the nominal objective itself)."""
+    one from a fit started at the nominal model (its fit stopped short of the nominal objective itself). And every
+    turned-down baseline family, which has no grid to look with."""
     scale2 = overdispersion(p, current, 0)
-    names = [s.name for s in screened
-             if not (s.promising or s.name in exclude or FAMILIES[s.name].kind == "baseline")]
+    left = [s.name for s in screened if not (s.promising or s.name in exclude)]
+    # a baseline's many coefficients have no coarse grid: it is refitted outright (a large drive effect inflates
+    # the over-dispersion its screening threshold is scaled by, and hides a drift under it)
+    baselines = [n for n in left if FAMILIES[n].kind == "baseline"]
+    names = [n for n in left if n not in baselines]
     objective = (grid_objectives or grid_objectives_here(p))(current, names)
-    return [n for n in names if current.objective - objective[n] > threshold(p, n, scale2, len(screened))]
+    return [n for n in names if current.objective - objective[n] > threshold(p, n, scale2, len(screened))] + baselines
 
 
 def _lead(rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge) -> StepCandidate:
