@@ -70,6 +70,7 @@ def format_text(result: dict) -> str:
         lines.append(f"  {e['effect']:22s} {e['verdict']:16s} strength {e['strength']:.4g} [{ci[0]:.4g}, {ci[1]:.4g}] "
                      f"{e['unit']}; closes {closed_share_text(e['closed_fraction'], ' of the held-out gap')}"
                      + (f"; confusable with {', '.join(e['confusable_with'])}" if e["confusable_with"] else ""))
+        lines += [f"      {n}" for n in e.get("notes", [])]
     if not result["named"]:
         lines.append("  none")
     for c in result["cannot_separate"]:

@@ -19,6 +19,7 @@ import dataclasses
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -215,7 +216,7 @@ class RunEngine:
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._held: dict[tuple, HeldFoot] = {}
-        self._spline_rows: dict[float, np.ndarray] = {}  # drift spline columns' row means, per knot spacing
+        self._spline_rows: dict[tuple, np.ndarray] = {}  # drift spline columns' row means, per knots and span
 
     def _weights(self, row_of: np.ndarray, cyc: np.ndarray) -> np.ndarray:
         """Per sample time, its weight in the row's mean of cycle means."""
@@ -472,36 +473,73 @@ class RunEngine:
         return out
 
     # --- the drift baseline (linear) -----------------------------------------------------------------------
-    def drift_basis(self, log10_tau_s: float, knot_s: float = 4.0) -> np.ndarray:
-        """Columns of this run's force baseline (rows x columns; 0 on camera rows): a cubic B-spline over the
-        run's force samples plus a warm-up from its first sample. Empty for a run without force rows."""
+    def force_span_s(self) -> tuple[float, float] | None:
+        """First and last force sample, on the clock its baseline shares (its own, less `run.clock_offset_s`)."""
         if not self.eval_is_force.any():
+            return None
+        tf = self.t[self.eval_is_force] - self.run.clock_offset_s
+        return float(tf.min()), float(tf.max())
+
+    def drift_basis(self, log10_tau_s: float, span_s: tuple[float, float] | None = None,
+                    knot_s: float = 4.0) -> np.ndarray:
+        """Columns of this run's force baseline (rows x columns; 0 on camera rows): a cubic B-spline over the
+        run's own force samples plus a warm-up from its first one. Empty for a run without force rows.
+
+        With `span_s` (times on a clock several runs share, `force_span_s`), the spline and warm-up span it, so
+        the runs' columns are one curve, and each force row takes its step's mean level (`_step_levels`): the
+        curve is then seen where it can be told from the drive, as one level per step at that step's time. Free
+        to differ between a step's phase windows, a baseline fits whatever the drive does in a run's few cycles
+        (an effect as well as a drift: on the external lab's grounding case 4252 it was named, at a wander of
+        4e-5 N/sqrt(s), in place of the re-seated contact of each file). A run on its own clock keeps that
+        freedom: it is the only way its drift shows."""
+        own = self.force_span_s()
+        if own is None:
             return np.zeros((self.n_rows, 0))
-        tf = self.t[self.eval_is_force]
-        t0, t1 = float(tf.min()), float(tf.max())
-        spline = self._spline_rows.get(knot_s)
+        t0, t1 = span_s or own
+        t = self.t - self.run.clock_offset_s
+        key = (knot_s, t0, t1)
+        spline = self._spline_rows.get(key)
         if spline is None:  # the spline's columns do not depend on the warm-up's time constant, which is fitted
-            basis = op.spline_basis(self.t, t0, t1, max(knot_s, (t1 - t0) / 8.0))
-            spline = self._spline_rows[knot_s] = np.array([self.row_means(c) for c in basis.T]).T
-        warm = self.row_means(op.warm_up(self.t - t0, 10.0 ** log10_tau_s))
+            basis = op.spline_basis(t, t0, t1, drift_knot_s(t0, t1, knot_s))
+            spline = self._spline_rows[key] = np.array([self.row_means(c) for c in basis.T]).T
+        warm = self.row_means(op.warm_up(t - t0, 10.0 ** log10_tau_s))
         out = np.column_stack([spline, warm])
         out[~self.is_force_row] = 0.0
-        return out
+        return self._step_levels @ out if span_s else out
 
-    def drift_wander(self, coefs: np.ndarray, log10_tau_s: float, knot_s: float = 4.0) -> tuple[float, float]:
-        """(sum of squared changes of the fitted baseline between points `knot_s` apart, time they span) over the
-        run's force samples: a random walk of rate q has E[sum] = q^2 x span, so q^2 = sum / span."""
-        if not self.eval_is_force.any() or coefs.size == 0:
-            return 0.0, 0.0
-        tf = self.t[self.eval_is_force]
-        t0, t1 = float(tf.min()), float(tf.max())
-        grid = np.linspace(t0, t1, max(2, int(round((t1 - t0) / knot_s)) + 1))
-        spline = op.spline_basis(grid, t0, t1, max(knot_s, (t1 - t0) / 8.0))
-        b = np.column_stack([spline, op.warm_up(grid - t0, 10.0 ** log10_tau_s)]) @ coefs
-        return float(np.sum(np.diff(b) ** 2)), t1 - t0
+    @cached_property
+    def _step_levels(self) -> np.ndarray:
+        """Row-averaging matrix: each force row gets the mean over its step's force rows (one repetition,
+        direction and mode: phase windows of the same cycles)."""
+        keys = [(r.step, r.repetition, r.direction, r.mode) if f else None
+                for r, f in zip(self.rows, self.is_force_row, strict=True)]
+        m = np.zeros((self.n_rows, self.n_rows))
+        for i, k in enumerate(keys):
+            if k is not None:
+                same = [j for j, kj in enumerate(keys) if kj == k]
+                m[i, same] = 1.0 / len(same)
+        return m
 
     def has_contact(self) -> bool:
         return bool(self.is_force_row.any()) and self.run.t_contact_s is not None
+
+
+def drift_knot_s(t0_s: float, t1_s: float, knot_s: float = 4.0) -> float:
+    """Knot spacing of a baseline spline over [t0, t1]: `knot_s`, or an eighth of the span if longer."""
+    return max(knot_s, (t1_s - t0_s) / 8.0)
+
+
+def drift_wander(coefs: np.ndarray, log10_tau_s: float, span_s: tuple[float, float],
+                 knot_s: float = 4.0) -> tuple[float, float]:
+    """(sum of squared changes of a fitted baseline (`RunEngine.drift_basis` over `span_s`) between points
+    `knot_s` apart, the time they span): a random walk of rate q has E[sum] = q^2 x span, so q^2 = sum / span."""
+    t0, t1 = span_s
+    if coefs.size == 0 or t1 <= t0:
+        return 0.0, 0.0
+    grid = np.linspace(t0, t1, max(2, int(round((t1 - t0) / knot_s)) + 1))
+    spline = op.spline_basis(grid, t0, t1, drift_knot_s(t0, t1, knot_s))
+    b = np.column_stack([spline, op.warm_up(grid - t0, 10.0 ** log10_tau_s)]) @ coefs
+    return float(np.sum(np.diff(b) ** 2)), t1 - t0
 
 
 def base_compliance_m_per_N(loss: float, exponent: float) -> float:

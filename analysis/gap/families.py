@@ -14,7 +14,7 @@ pairs side by side):
 | width_loss | constant kerf per cut edge on the tapered plate | fraction of the mean width lost |
 | pzt_thickness, pzt_modulus, cf_thickness | the parameter scaled | fractional change |
 | grounding_lengthening | active length scaled, the rigid extension kept | fractional change |
-| sensor_drift | per run a penalised cubic spline plus a warm-up t / (t + tau) of the force baseline | N/sqrt(s) |
+| sensor_drift | per run (per specimen on one clock) a penalised cubic spline + warm-up t / (t + tau) | N/sqrt(s) |
 | bias_error | coupler lengthening offset (leg) | m |
 | stage_backlash | play on the stage-target sequence | m (full width) |
 
@@ -82,7 +82,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("cf_thickness", "fractional change of the carbon-fibre layer thickness", (-0.7, 1.0),
            "carbon-fibre layer thickness scaled", "params", tolerance=0.10, scale=0.2),
     Family("sensor_drift", "N/sqrt(s) (baseline wander rate)", (0.0, math.inf),
-           "per-run force baseline: penalised cubic spline + warm-up t/(t + tau)", "baseline",
+           "force baseline per run (per specimen on a shared clock): penalised cubic spline + warm-up t/(t + tau)",
+           "baseline",
            {"warmup_log10_tau_s": Shape(1.5, 0.5, 3.0, 1.0)}, scale=2e-5),
     Family("bias_error", "m", (-150e-6, 150e-6), "coupler lengthening offset", "design", scale=20e-6),
     Family("stage_backlash", "m", (0.0, 60e-6), "play on the stage-target sequence", "stage", scale=5e-6),

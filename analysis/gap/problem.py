@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
 from analysis.gap import tolerances as tol
-from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance
+from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, drift_wander
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import GapData
 
@@ -164,7 +164,8 @@ class Problem:
         self.plate_groups = [g for g in self.groups
                              if sum(t == self.group_type[g] for t in self.group_type.values()) >= 2]
         self._cache: list[OrderedDict] = [OrderedDict() for _ in self.engines]
-        self._drift_basis: dict[tuple[int, float], np.ndarray] = {}
+        self._drift_basis: dict[tuple[int, float], list[tuple[int, np.ndarray]]] = {}
+        self.baselines = self._baseline_units()
         self.ramp_rates = self._ramp_rates()
 
     # --- structure -----------------------------------------------------------------------------------------
@@ -213,6 +214,27 @@ class Problem:
                         out.append(r)
         return sorted(out)
 
+    def _baseline_units(self) -> list[tuple[int, ...]]:
+        """The runs that share one force baseline: those evaluated on one specimen's shared clock
+        (`history.share_specimen_history`: a sensor drifts on between the files of one mounting, and its level in
+        each file is one sample of one curve), every other run on its own. Runs without force rows have none."""
+        shared: dict[str, list[int]] = {}
+        out: list[tuple[int, ...]] = []
+        for k, e in enumerate(self.engines):
+            if e.force_span_s() is None:
+                continue
+            label = getattr(e.run, "drive_history", "own")
+            if label == "own":
+                out.append((k,))
+            else:
+                shared.setdefault(label, []).append(k)
+        return sorted(out + [tuple(v) for v in shared.values()])
+
+    def baseline_span_s(self, u: int) -> tuple[float, float]:
+        """First and last force sample of baseline u's runs, on their shared clock."""
+        spans = [s for s in (self.engines[k].force_span_s() for k in self.baselines[u]) if s is not None]
+        return min(a for a, _ in spans), max(b for _, b in spans)
+
     # --- layout ----------------------------------------------------------------------------------------------
     def layout(self, names: tuple[str, ...] | list[str]) -> Layout:
         names = tuple(names)
@@ -239,10 +261,9 @@ class Problem:
         if any(n in FIELD_EFFECTS for n in names):
             params += [Param("plate", (g,), -PLATE_BOUND, PLATE_BOUND, 0.02, 0.0) for g in self.plate_groups]
         if "sensor_drift" in names:
-            for k in range(len(self.engines)):
-                for j in range(self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default
-                                                  ).shape[1]):
-                    params.append(Param("drift", (k, j), -1.0, 1.0, 1e-3, 0.0))
+            for u in range(len(self.baselines)):
+                for j in range(self._n_drift_columns(u)):
+                    params.append(Param("drift", (u, j), -1.0, 1.0, 1e-3, 0.0))
         return params
 
     def _nuisance_params(self) -> list[Param]:
@@ -261,7 +282,7 @@ class Problem:
 
     def _n_prior(self, names: tuple[str, ...], params: list[Param]) -> int:
         n = 2 * len(self.groups) + sum(1 for p in params if p.kind in ("shape", "plate"))
-        n += sum(self._smooth_rows(k) for k in range(len(self.engines))) if "sensor_drift" in names else 0
+        n += sum(self._smooth_rows(u) for u in range(len(self.baselines))) if "sensor_drift" in names else 0
         n += sum(1 for p in params if p.kind == "drift")
         return n
 
@@ -288,9 +309,10 @@ class Problem:
                 rows = self._runs_where(lambda e, s_=p.key[0]: e.has_contact() and self.session_of(e) == s_)
             elif p.kind == "lag":
                 rows = np.array([self.chain_of(self.engines[r.run], r.quantity) == p.key for r in self.rows])
-            else:   # drift coefficient of run k
+            else:   # drift coefficient of baseline u: its runs' rows
                 rows = np.zeros(self.y.size, bool)
-                rows[self.slices[p.key[0]]] = True
+                for k in self.baselines[p.key[0]]:
+                    rows[self.slices[k]] = True
             hit = np.r_[np.flatnonzero(rows), lay.n_rows + np.asarray(prior_of.get(i, []), dtype=int)]
             row_idx.append(hit)
             col_idx.append(np.full(hit.size, i))
@@ -314,10 +336,10 @@ class Problem:
         return out
 
     def _drift_prior_rows(self, lay: Layout, out: dict[int, list[int]], j: int) -> None:
-        """The drift baseline's smoothness rows (per run), then one ridge row per drift coefficient."""
-        for k in range(len(self.engines)):
-            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
-            n_s = self._smooth_rows(k)
+        """The drift baselines' smoothness rows (per baseline), then one ridge row per drift coefficient."""
+        for u in range(len(self.baselines)):
+            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == u]
+            n_s = self._smooth_rows(u)
             for r in range(n_s):
                 for c in cols[:-1]:
                     out.setdefault(c, []).append(j + r)
@@ -328,22 +350,27 @@ class Problem:
                 j += 1
 
     # --- drift baseline --------------------------------------------------------------------------------------
-    def drift_columns(self, k: int, log10_tau: float) -> np.ndarray:
-        key = (k, round(float(log10_tau), 6))
+    def drift_columns(self, u: int, log10_tau: float) -> list[tuple[int, np.ndarray]]:
+        """Baseline u's columns on each of its runs: (run index, rows x columns)."""
+        key = (u, round(float(log10_tau), 6))
         b = self._drift_basis.get(key)
         if b is None:
-            if len(self._drift_basis) > 4 * len(self.engines):
+            if len(self._drift_basis) > 4 * len(self.baselines):
                 self._drift_basis.clear()
-            b = self._drift_basis[key] = self.engines[k].drift_basis(log10_tau)
+            span = self.baseline_span_s(u) if len(self.baselines[u]) > 1 else None
+            b = self._drift_basis[key] = [(k, self.engines[k].drift_basis(log10_tau, span))
+                                          for k in self.baselines[u]]
         return b
 
-    def _smooth_rows(self, k: int) -> int:
-        n = self.drift_columns(k, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default).shape[1]
-        return max(n - 1 - 2, 0)   # second differences of the spline coefficients (the warm-up column apart)
+    def _n_drift_columns(self, u: int) -> int:
+        return self.drift_columns(u, FAMILIES["sensor_drift"].shapes["warmup_log10_tau_s"].default)[0][1].shape[1]
 
-    def _smooth_sd(self, k: int) -> float:
-        e = self.engines[k]
-        s = self.sigma[self.slices[k]][e.is_force_row]
+    def _smooth_rows(self, u: int) -> int:
+        return max(self._n_drift_columns(u) - 1 - 2, 0)   # second differences of the spline coefficients (the
+        #                                                  warm-up column apart)
+
+    def _smooth_sd(self, u: int) -> float:
+        s = np.concatenate([self.sigma[self.slices[k]][self.engines[k].is_force_row] for k in self.baselines[u]])
         return 3.0 * float(np.median(s)) if s.size else 1.0
 
     # --- the residual ----------------------------------------------------------------------------------------
@@ -402,13 +429,28 @@ class Problem:
         for k in range(len(self.engines)):
             out[self.slices[k]] = self._run_model(k, effects, self.nuisance(lay, x, k))
         if "sensor_drift" in lay.names:
-            tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
-            for k in range(len(self.engines)):
-                cols = self.drift_columns(k, tau)
-                if cols.shape[1]:
-                    coef = np.array([x[lay.index[("drift", k, j)]] for j in range(cols.shape[1])])
-                    out[self.slices[k]] += cols @ coef
+            out += self.drift_rows(lay, x)
         return out
+
+    def drift_rows(self, lay: Layout, x: np.ndarray) -> np.ndarray:
+        """Per row, what the fitted force baselines add (0 on camera rows and without the drift)."""
+        out = np.zeros(self.y.size)
+        if "sensor_drift" not in lay.names:
+            return out
+        tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
+        for u in range(len(self.baselines)):
+            runs = self.drift_columns(u, tau)
+            coef = np.array([x[lay.index[("drift", u, j)]] for j in range(runs[0][1].shape[1])])
+            for k, cols in runs:
+                out[self.slices[k]] += cols @ coef
+        return out
+
+    def drift_excursion_N(self, lay: Layout, x: np.ndarray) -> float:
+        """The largest span of one fitted baseline over its force rows (N): how far the baseline moved."""
+        d = self.drift_rows(lay, x)
+        spans = [float(np.ptp(np.concatenate([d[self.slices[k]][self.engines[k].is_force_row] for k in b])))
+                 for b in self.baselines]
+        return max(spans, default=0.0)
 
     def residual(self, lay: Layout, x: np.ndarray) -> np.ndarray:
         m = self.model(lay, x)
@@ -428,11 +470,11 @@ class Problem:
             elif p.kind == "plate":
                 out.append(v / tol.TOLERANCE["pzt_thickness"])
         if "sensor_drift" in lay.names:
-            for k in range(len(self.engines)):
-                n_s = self._smooth_rows(k)
+            for u in range(len(self.baselines)):
+                n_s = self._smooth_rows(u)
                 if n_s:
-                    c = np.array([x[lay.index[("drift", k, j)]] for j in range(n_s + 2)])
-                    out.extend(np.diff(c, 2) / self._smooth_sd(k))
+                    c = np.array([x[lay.index[("drift", u, j)]] for j in range(n_s + 2)])
+                    out.extend(np.diff(c, 2) / self._smooth_sd(u))
             out.extend(x[i] / DRIFT_RIDGE_N for i, p in enumerate(lay.params) if p.kind == "drift")
         return np.asarray(out, float)
 
@@ -463,13 +505,13 @@ class Problem:
 
     def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
         """Wander rate of the fitted force baselines, N/sqrt(s): sqrt(sum of squared changes between points 4 s
-        apart / time spanned), over every run (a random walk's rate)."""
+        apart / time spanned), over every baseline (a random walk's rate)."""
         tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
         ss, n = 0.0, 0.0
-        for k, e in enumerate(self.engines):
-            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == k]
+        for u in range(len(self.baselines)):
+            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == u]
             if cols:
-                a, b = e.drift_wander(x[cols], tau)
+                a, b = drift_wander(x[cols], tau, self.baseline_span_s(u))
                 ss, n = ss + a, n + b
         return math.sqrt(ss / n) if n else 0.0
 

@@ -120,6 +120,9 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
             notes.append("the fitted wander is no more than the baseline's noise puts there (interval 0 - 0)"
                          if FAMILIES[name].kind == "baseline" else
                          "its strength's 95 % interval includes 0, the nominal model")
+        if FAMILIES[name].kind == "baseline":
+            moved_mN = p.drift_excursion_N(final.layout, final.x) * 1e3
+            notes.append(f"the fitted force baseline moves by up to {moved_mN:.3g} mN within one run or shared clock")
         if total_closed < CLOSED_MIN and verdict == "attributed":
             verdict = "unexplained"
             notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")
