@@ -487,11 +487,10 @@ class RunEngine:
 
         With `span_s` (times on a clock several runs share, `force_span_s`), the spline and warm-up span it, so
         the runs' columns are one curve, and each force row takes its step's mean level (`_step_levels`): the
-        curve is then seen where it can be told from the drive, as one level per step at that step's time. Free
-        to differ between a step's phase windows, a baseline fits whatever the drive does in a run's few cycles
-        (an effect as well as a drift: on the external lab's grounding case 4252 it was named, at a wander of
-        4e-5 N/sqrt(s), in place of the re-seated contact of each file). A run on its own clock keeps that
-        freedom: it is the only way its drift shows."""
+        curve is then seen where it can be told from the drive, as one level per step at that step's time: free
+        to differ between a step's phase windows, a baseline fits whatever the drive does in a run's few cycles,
+        an effect as well as a drift (docs/gap.md). A run on its own clock keeps that freedom: it is the only way
+        its drift shows."""
         own = self.force_span_s()
         if own is None:
             return np.zeros((self.n_rows, 0))

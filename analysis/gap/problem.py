@@ -166,6 +166,7 @@ class Problem:
         self._cache: list[OrderedDict] = [OrderedDict() for _ in self.engines]
         self._drift_basis: dict[tuple[int, float], list[tuple[int, np.ndarray]]] = {}
         self.baselines = self._baseline_units()
+        self._steps_of_baseline: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.ramp_rates = self._ramp_rates()
 
     # --- structure -----------------------------------------------------------------------------------------
@@ -504,16 +505,42 @@ class Problem:
         return fit
 
     def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
-        """Wander rate of the fitted force baselines, N/sqrt(s): sqrt(sum of squared changes between points 4 s
-        apart / time spanned), over every baseline (a random walk's rate)."""
+        """Wander rate of the fitted force baselines, N/sqrt(s), a random walk's rate: sqrt(sum of squared changes
+        / time spanned) over every baseline. A run on its own clock: its spline's changes between points 4 s
+        apart. Runs on a shared clock: the changes between its consecutive step levels, where the data see the
+        curve (between them only the smoothness prior shapes it)."""
         tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
+        rows = None
         ss, n = 0.0, 0.0
-        for u in range(len(self.baselines)):
-            cols = [i for i, p in enumerate(lay.params) if p.kind == "drift" and p.key[0] == u]
-            if cols:
+        for u, runs in enumerate(self.baselines):
+            if len(runs) > 1:
+                rows = self.drift_rows(lay, x) if rows is None else rows
+                t, where = self._step_points(u)
+                levels = rows[where]
+                a, b = float(np.sum(np.diff(levels) ** 2)), float(t[-1] - t[0]) if t.size else 0.0
+            else:
+                cols = [i for i, q in enumerate(lay.params) if q.kind == "drift" and q.key[0] == u]
                 a, b = drift_wander(x[cols], tau, self.baseline_span_s(u))
-                ss, n = ss + a, n + b
+            ss, n = ss + a, n + b
         return math.sqrt(ss / n) if n else 0.0
+
+    def _step_points(self, u: int) -> tuple[np.ndarray, np.ndarray]:
+        """Shared baseline u's steps in time order: each step's mean sample time on the shared clock, and one of
+        its force rows (global index: every force row of a step holds the step's level)."""
+        if u not in self._steps_of_baseline:
+            pts = []
+            for k in self.baselines[u]:
+                e = self.engines[k]
+                steps: dict[tuple, list[int]] = {}
+                for i, r in enumerate(e.rows):
+                    if e.is_force_row[i]:
+                        steps.setdefault((r.step, r.repetition, r.direction, r.mode), []).append(i)
+                for idx in steps.values():
+                    t = float(np.mean(np.concatenate([e.rows[i].eval_times_s for i in idx]))) - e.run.clock_offset_s
+                    pts.append((t, self.slices[k].start + idx[0]))
+            pts.sort()
+            self._steps_of_baseline[u] = (np.array([a for a, _ in pts]), np.array([b for _, b in pts], int))
+        return self._steps_of_baseline[u]
 
     def initial_nuisances(self) -> dict[tuple, float]:
         """Starting values of the contact shifts and lags on the nominal model, by a grid per session and per

@@ -74,3 +74,28 @@ def test_a_specimens_runs_on_one_clock_share_one_curve_seen_as_step_levels(lab_f
     # the runs of other specimens, on their own clocks, keep one baseline each
     others = [b for b in p.baselines if b != shared]
     assert others and all(len(b) == 1 for b in others)
+
+
+def test_a_shared_baselines_wander_is_read_where_the_data_see_it(lab_files):
+    data = load_gap_data(lab_files)
+    runs = _force_runs_of(data, data.runs[0].specimen)
+    start = 0.0
+    for r in runs:
+        first = min(float(row.eval_times_s.min()) for row in r.rows)
+        last = max(float(row.eval_times_s.max()) for row in r.rows)
+        r.clock_offset_s, r.drive_history = first - start, "specimen shared"
+        start += last - first + 5.0
+    p = Problem(data)
+    u = p.baselines.index(tuple(sorted(r.index for r in runs)))
+    lay = p.layout(("sensor_drift",))
+    idx = [lay.index[("drift", u, j)] for j in range(p.drift_columns(u, 1.5)[0][1].shape[1])]
+    x = lay.vector()
+    x[idx] = np.random.default_rng(0).normal(0.0, 1e-4, len(idx))
+    stacked = np.vstack([cols for _, cols in p.drift_columns(u, float(x[lay.index[("shape", "sensor_drift",
+                                                                                      "warmup_log10_tau_s")]]))])
+    _, sv, vt = np.linalg.svd(stacked)
+    unseen = vt[int(np.sum(sv > 1e-9 * sv[0]))]        # a direction of the coefficients no row sees
+    before = p.drift_strength(lay, x)
+    assert before > 0
+    x[idx] += 1e-3 * unseen
+    assert p.drift_strength(lay, x) == pytest.approx(before, rel=1e-6)
