@@ -156,15 +156,17 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
         lines.append(f"| {g['protocol']} | {g['condition']} | {g['rms_gap']:.3g} | {g['noise_floor']:.3g} | "
                      f"{g['p_value']:.2g} |")
     lines += ["", "## Which, and how much of the gap", "", "![waterfall](waterfall.png)", "",
-              "| effect | verdict | strength [95 % CI] | held-out RMS before -> after | closes | confusable with |",
-              "|---|---|---|---|---|---|"]
+              "| effect | verdict | strength [95 % CI] | held-out RMS before -> after | closes | confusable with "
+              "| notes |",
+              "|---|---|---|---|---|---|---|"]
     for e in result["named"]:
         ci = e["strength_ci95"]
         lines.append(f"| {e['effect']} | {e['verdict']} | {e['strength']:.3g} [{ci[0]:.3g}, {ci[1]:.3g}] "
                      f"{e['unit']} | {e['heldout_rms_before']:.2f} -> {e['heldout_rms_after']:.2f} | "
-                     f"{closed_share_text(e['closed_fraction'])} | {', '.join(e['confusable_with']) or '-'} |")
+                     f"{closed_share_text(e['closed_fraction'])} | {', '.join(e['confusable_with']) or '-'} | "
+                     f"{'; '.join(e.get('notes', [])) or '-'} |")
     if not result["named"]:
-        lines.append("| none | | | | | |")
+        lines.append("| none | | | | | | |")
     for c in result["cannot_separate"]:
         lines += ["", f"The data cannot separate {', '.join(c['effects'])}. Measurements that would: "
                   + "; ".join(f"{k}: {v}" for k, v in c["separated_by"].items() if v) + "."]
