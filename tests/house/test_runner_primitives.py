@@ -105,12 +105,24 @@ def test_request_abort_from_another_thread_ends_the_run_as_ctrl_c_does():
     rec = FakeRecorder()
     runner = Runner(rig, rec)
     done = threading.Event()
+    requested = threading.Event()
+    clock_sleep = rig.clock.sleep
+
+    def sleep_until_requested(duration_s):
+        # past 2 s the run waits for the other thread's request, so a loaded machine that schedules that thread
+        # late cannot let the whole protocol finish first
+        clock_sleep(duration_s)
+        if rig.clock.now_s() >= 2.0:
+            requested.wait(10.0)
+
+    rig.clock.sleep = sleep_until_requested
 
     def abort_when_running():
         while rig.clock.now_s() < 2.0 and not done.is_set():
             done.wait(0.001)
         runner.request_abort("stop pressed in the live view")
         runner.request_abort("a second request")  # the first reason is the one recorded
+        requested.set()
 
     thread = threading.Thread(target=abort_when_running)
     thread.start()
