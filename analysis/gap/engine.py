@@ -507,16 +507,21 @@ class RunEngine:
         return self._step_levels @ out if span_s else out
 
     @cached_property
+    def force_steps(self) -> list[list[int]]:
+        """This run's force rows grouped by step (one repetition, direction and mode: phase windows of the same
+        cycles), in row order."""
+        steps: dict[tuple, list[int]] = {}
+        for i, (r, force) in enumerate(zip(self.rows, self.is_force_row, strict=True)):
+            if force:
+                steps.setdefault((r.step, r.repetition, r.direction, r.mode), []).append(i)
+        return list(steps.values())
+
+    @cached_property
     def _step_levels(self) -> np.ndarray:
-        """Row-averaging matrix: each force row gets the mean over its step's force rows (one repetition,
-        direction and mode: phase windows of the same cycles)."""
-        keys = [(r.step, r.repetition, r.direction, r.mode) if f else None
-                for r, f in zip(self.rows, self.is_force_row, strict=True)]
+        """Row-averaging matrix: each force row gets the mean over its step's force rows (`force_steps`)."""
         m = np.zeros((self.n_rows, self.n_rows))
-        for i, k in enumerate(keys):
-            if k is not None:
-                same = [j for j, kj in enumerate(keys) if kj == k]
-                m[i, same] = 1.0 / len(same)
+        for same in self.force_steps:
+            m[np.ix_(same, same)] = 1.0 / len(same)
         return m
 
     def has_contact(self) -> bool:

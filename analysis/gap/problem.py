@@ -531,11 +531,7 @@ class Problem:
             pts = []
             for k in self.baselines[u]:
                 e = self.engines[k]
-                steps: dict[tuple, list[int]] = {}
-                for i, r in enumerate(e.rows):
-                    if e.is_force_row[i]:
-                        steps.setdefault((r.step, r.repetition, r.direction, r.mode), []).append(i)
-                for idx in steps.values():
+                for idx in e.force_steps:
                     t = float(np.mean(np.concatenate([e.rows[i].eval_times_s for i in idx]))) - e.run.clock_offset_s
                     pts.append((t, self.slices[k].start + idx[0]))
             pts.sort()
