@@ -151,7 +151,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     population = population_test(p, nominal)
     gap = lack["p_value"] < GAP_ALPHA or population["p_value"] < GAP_ALPHA
     where = [g.to_json() for g in res.regions(p, nominal.z)]
-    judge = Judge(p, seed)
+    judge = Judge(p, seed, reference=nominal)
     # forked after the nominal fit, so the workers start from its warmed caches
     with FitPool(p, jobs if gap else 1, judge) as pool:
         screened, screen_fits = screen(p, nominal, names, pool.add_each) if gap else ([], {})

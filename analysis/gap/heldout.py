@@ -11,6 +11,12 @@ conditions.
 
 The held-out z of a model is both vectors together; under the right model its RMS is ~1 (the noise floor).
 
+Every model on one problem is measured in the same units: each row's predictive spread as the nominal fit has it
+(the judge's reference). A model's own spread would include the uncertainty of its own parameters, so a vaguer
+model (a force baseline whose coefficients a left-out file barely constrains, ~2 mN wide against a ~0.2 mN
+noise) would divide its own errors by more and look better held out without predicting better. In the
+reference's units, a smaller held-out z is a smaller prediction error.
+
 The refit without a fold is one Gauss-Newton step from the full-data optimum on the training rows (and the other
 prior rows), with the full fit's Jacobian: the standard linearised cross-validation, exact for a model linear in
 its parameters near the optimum and far cheaper than a nonlinear refit per fold. A left-out specimen's gains are
@@ -63,13 +69,15 @@ def specimen_folds(p: Problem) -> list[str]:
     return list(p.groups) if len(p.groups) >= 2 else []
 
 
-def specimen_z(p: Problem, fit: Fit, groups: list[str]) -> np.ndarray:
-    """Per row, its z when its specimen was left out and predicted from the population: its gains at 0, the
-    rest refitted by one linearised step without its rows and prior rows, in units of the predictive spread
-    sqrt(1 + j Sigma j^T) (j: the row's sensitivity to its specimen's gains, Sigma: their tolerance prior)."""
+def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, its error (noise units) when its specimen was left out and predicted from the population: its
+    gains at 0, the rest refitted by one linearised step without its rows and prior rows; and its predictive
+    spread sqrt(1 + j Sigma j^T) (j: the row's sensitivity to its specimen's gains, Sigma: their tolerance
+    prior)."""
     n = fit.layout.n_rows
     lay = fit.layout
     out = np.zeros(n)
+    spreads = np.ones(n)
     prior_rows = p.prior_rows(lay)
     for g in groups:
         rows = np.zeros(n, bool)
@@ -91,14 +99,14 @@ def specimen_z(p: Problem, fit: Fit, groups: list[str]) -> np.ndarray:
         z_pop = np.where(np.isfinite(z_pop), z_pop, NAN_Z)
         jg = fit.jac[:n][rows][:, cols]
         cov = np.linalg.inv(p.gain_whitening[g].T @ p.gain_whitening[g])
-        spread = np.sqrt(1.0 + np.einsum("ij,jk,ik->i", jg, cov, jg))
-        out[rows] = (z_pop[rows] + fit.jac[:n][np.ix_(rows, keep_cols)] @ step) / spread
-    return out
+        spreads[rows] = np.sqrt(1.0 + np.einsum("ij,jk,ik->i", jg, cov, jg))
+        out[rows] = z_pop[rows] + fit.jac[:n][np.ix_(rows, keep_cols)] @ step
+    return out, spreads
 
 
-def heldout_z(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Per row, its z when its fold was left out of the fit, in units of its predictive spread; and each fold's
-    parameter step (for jackknives).
+def heldout_errors(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Per row, its error (noise units) when its fold was left out of the fit, and its predictive spread; and each
+    fold's parameter step (for jackknives).
 
     The spread is sqrt(1 + j (J_t^T J_t)^+ j^T) (j: the row's sensitivities, J_t: the training rows' and priors'
     Jacobian): a condition predicted from the others carries the uncertainty of the parameters estimated without
@@ -109,6 +117,7 @@ def heldout_z(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, list[
     n = fit.layout.n_rows
     r, j = fit.residual, fit.jac
     out = np.zeros(n)
+    spreads = np.ones(n)
     steps = []
     for held in fold_masks:
         train = np.r_[~held, np.ones(r.size - n, bool)]
@@ -117,10 +126,10 @@ def heldout_z(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, list[
         proj = vt[keep].T / s[keep]                       # V S^-1 on the kept directions
         step = -proj @ (u[:, keep].T @ r[train])
         jh = j[:n][held]
-        spread = np.sqrt(1.0 + np.sum((jh @ proj) ** 2, axis=1))
-        out[held] = (r[:n][held] + jh @ step) / spread
+        spreads[held] = np.sqrt(1.0 + np.sum((jh @ proj) ** 2, axis=1))
+        out[held] = r[:n][held] + jh @ step
         steps.append(step)
-    return out, steps
+    return out, spreads, steps
 
 
 def rms(v: np.ndarray) -> float:
@@ -139,9 +148,10 @@ def _boot_rows(cid: np.ndarray, sid: np.ndarray, rng: np.random.Generator, n: in
 
 class Judge:
     """Held-out figures of any fit on one problem, with one fixed set of bootstrap resamples (so differences
-    between models are paired)."""
+    between models are paired), in the predictive spreads of one `reference` fit (the nominal; without one, each
+    fit in its own)."""
 
-    def __init__(self, p: Problem, seed: int = 0) -> None:
+    def __init__(self, p: Problem, seed: int = 0, reference: Fit | None = None) -> None:
         self.p = p
         self.folds = folds(p)
         self.specimens = specimen_folds(p)
@@ -150,18 +160,29 @@ class Judge:
         n = p.y.size
         # a resample of rows takes both of a row's held-out z (condition and specimen) together
         self.resamples = [np.r_[r, r + n] for r in rows] if self.specimens else rows
+        self.spread: np.ndarray | None = None
+        if reference is not None:
+            self.spread = self._errors(reference)[1]
 
     def z(self, fit: Fit) -> np.ndarray:
         """Held-out z per row: the condition folds', then (with two or more specimens) the specimen folds'.
         Computed on one BLAS thread, as in the fit workers (`fitpool`), so the figures do not depend on where
         they were computed (a thread count changes a pseudo-inverse's last digits, and with them its cut)."""
         if "heldout_z" not in fit.extra:
-            with threadpool_limits(limits=1):
-                z, fit.extra["fold_steps"] = heldout_z(fit, self.folds)
-                if self.specimens:
-                    z = np.r_[z, specimen_z(self.p, fit, self.specimens)]
+            e, spread = self._errors(fit)
+            z = e / (spread if self.spread is None else self.spread)
             fit.extra["heldout_z"] = z
         return fit.extra["heldout_z"]
+
+    def _errors(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
+        """Held-out errors (noise units) and the fit's own predictive spreads, condition folds then specimen
+        folds; keeps the fold steps in `fit.extra` (the strength jackknife reads them)."""
+        with threadpool_limits(limits=1):
+            e, spread, fit.extra["fold_steps"] = heldout_errors(fit, self.folds)
+            if self.specimens:
+                es, ss = specimen_errors(self.p, fit, self.specimens)
+                e, spread = np.r_[e, es], np.r_[spread, ss]
+        return e, spread
 
     def heldout(self, fit: Fit) -> HeldOut:
         z = self.z(fit)
