@@ -144,8 +144,8 @@ class Diagnosis:
                 "specimen_population": self.specimen_population, "detection_limits": self.detection_limits,
                 "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
-                "heldout_units": "noise units (z = residual / pure-error standard error; for a specimen left "
-                                 "out, / its predictive spread); 1 = the noise floor",
+                "heldout_units": "noise units (z = held-out residual / pure-error standard error / the nominal "
+                                 "fit's predictive spread there, the same for every model); 1 = the noise floor",
                 "recordings": self.recordings, "elapsed_s": self.elapsed_s}
 
 
