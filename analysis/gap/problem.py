@@ -485,9 +485,13 @@ class Problem:
         """Fit the effects `names` with every nuisance; `start` holds parameter values to start from (any
         subset; others from their defaults)."""
         lay = self.layout(names)
-        x0 = lay.vector(start)
         lo, hi = lay.bounds()
         scale = np.array([p.scale for p in lay.params])
+        # the solver's finite-difference step is relative to each value: a start a hair off 0 (a grid's midpoint
+        # comes out at ~1e-21) gets a step far below the model's resolution, a zero Jacobian column, and the
+        # parameter never moves; at exactly 0 the step is absolute
+        x0 = lay.vector(start)
+        x0 = np.where(np.abs(x0) < 1e-9 * scale, 0.0, x0)
         r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
                           jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
                           ftol=1e-6, xtol=1e-6)
