@@ -162,7 +162,8 @@ class Judge:
         self.resamples = [np.r_[r, r + n] for r in rows] if self.specimens else rows
         self.spread: np.ndarray | None = None
         if reference is not None:
-            self.spread = self._errors(reference)[1]
+            e, self.spread = self._errors(reference)
+            reference.extra["heldout_z"] = e / self.spread      # judged once: its own spreads are the units
 
     def z(self, fit: Fit) -> np.ndarray:
         """Held-out z per row: the condition folds', then (with two or more specimens) the specimen folds'.
