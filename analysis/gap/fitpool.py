@@ -13,24 +13,24 @@ from __future__ import annotations
 import math
 import multiprocessing
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
-from analysis.gap.screening import add_each_here, grid_objectives_here
+from analysis.gap.screening import Start, add_each_here, fit_added, grid_objectives_here
 from analysis.parallel import one_blas_thread
 
 _PROBLEM: Problem | None = None      # the problem a forked worker inherited
 _JUDGE: Judge | None = None          # and its held-out judge
 
 
-def _add_one(task: tuple[Fit, str, int, bool]) -> tuple[Fit, float]:
-    base, name, max_nfev, judged = task
+def _add_one(task: tuple[Fit, str, Start | None, int, bool]) -> tuple[Fit, float]:
+    base, name, start, max_nfev, judged = task
     assert _PROBLEM is not None  # set before the workers were forked
     t0 = time.perf_counter()
-    fit = add_each_here(_PROBLEM)(base, [name], max_nfev)[name]
+    fit = fit_added(_PROBLEM, base, name, start, max_nfev)
     if judged and _JUDGE is not None:
         _JUDGE.z(fit)            # kept in fit.extra, returned with the fit
     return fit, time.perf_counter() - t0
@@ -43,7 +43,8 @@ def _grid_one(task: tuple[Fit, str]) -> float:
 
 
 class FitPool:
-    """`add_each(base, names, max_nfev)`: for each name, `base`'s effects plus that one, refitted."""
+    """`add_each(base, names, max_nfev, starts)`: `screening.AddEach`, its fits side by side (each of a name's
+    starts a task of its own)."""
 
     def __init__(self, p: Problem, jobs: int = 1, judge: Judge | None = None) -> None:
         self.p = p
@@ -55,23 +56,30 @@ class FitPool:
             self._pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"),
                                              initializer=one_blas_thread)
 
-    def add_each(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
-        return self._add_each(base, names, max_nfev, judged=False)
+    def add_each(self, base: Fit, names: Sequence[str], max_nfev: int,
+                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
+        return self._add_each(base, names, max_nfev, starts or {}, judged=False)
 
-    def add_each_judged(self, base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
+    def add_each_judged(self, base: Fit, names: Sequence[str], max_nfev: int,
+                        starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
         """`add_each`, each fit returned with its held-out z (a selection step judges every fit it makes)."""
-        return self._add_each(base, names, max_nfev, judged=True)
+        return self._add_each(base, names, max_nfev, starts or {}, judged=True)
 
-    def _add_each(self, base: Fit, names: Sequence[str], max_nfev: int, judged: bool) -> dict[str, Fit]:
-        if self._pool is None or len(names) < 2:
-            return add_each_here(self.p)(base, names, max_nfev)
+    def _add_each(self, base: Fit, names: Sequence[str], max_nfev: int,
+                  starts: Mapping[str, Sequence[Start | None]], judged: bool) -> dict[str, Fit]:
+        tasks = [(n, s0) for n in names for s0 in starts.get(n, [None])]
+        if self._pool is None or len(tasks) < 2:
+            return add_each_here(self.p)(base, names, max_nfev, starts)
         # longest first (by what each candidate's last fit took; a new one counts as longest): the step waits for
         # its slowest fit, so that one should not start last
-        order = sorted(names, key=lambda n: -self._took.get(n, math.inf))
-        tasks = [(base, n, max_nfev, judged) for n in order]
-        done = dict(zip(order, self._pool.map(_add_one, tasks), strict=True))
-        self._took.update({n: took for n, (_, took) in done.items()})
-        return {n: done[n][0] for n in names}
+        tasks.sort(key=lambda t: -self._took.get(t[0], math.inf))
+        out: dict[str, Fit] = {}
+        done = self._pool.map(_add_one, [(base, n, s0, max_nfev, judged) for n, s0 in tasks])
+        for (n, _), (fit, took) in zip(tasks, done, strict=True):
+            self._took[n] = took
+            if n not in out or fit.objective < out[n].objective:
+                out[n] = fit
+        return {n: out[n] for n in names}
 
     def grid_objectives(self, base: Fit, names: Sequence[str]) -> dict[str, float]:
         """Each candidate's best objective on its coarse grid added to `base` (`screening.grid_best`)."""

@@ -2,7 +2,10 @@
 turn to the effects named so far and the whole refitted (in batches of MAX_TRIED by screening improvement, the next
 batch only when none of the last passes); of those whose in-sample improvement passes the likelihood-ratio test and
 whose held-out reduction's bootstrap interval is above 0, the one that lowers the held-out gap most is named.
-Candidates whose addition is as good on both counts are named with it as one ambiguous set. The selection stops
+Candidates whose addition is as good on both counts are named with it as one ambiguous set. A rival of a step's
+lead (it passed there too and explained at least half as much in-sample) is fitted at the next step from its own
+fit as well as from the lead's, and the better fit kept: two effects that explain much the same misfit can leave
+their joint fit in whichever basin it started from. The selection stops
 when nothing passes, when the held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The
 waterfall is the held-out gap after each addition."""
 
@@ -17,13 +20,14 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import (AddEach, GridObjectives, add_each_here, grid_objectives_here, improvement,
-                                    overdispersion, threshold)
+from analysis.gap.screening import (AddEach, GridObjectives, Start, add_each_here, carried_start,
+                                    grid_objectives_here, improvement, overdispersion, threshold)
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
 TIE_RATIO = 1.1          # held-out RMS within 10 % counts as a tie
 STEP_ALPHA = 0.01
+RIVAL_SHARE = 0.5        # a candidate explaining this share of the lead's in-sample improvement is its rival
 
 
 @dataclass
@@ -52,6 +56,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     current = nominal
     rejected: list[StepCandidate] = []
     spent: set[str] = set()   # named, alone or in an ambiguous set
+    passed: dict[str, Fit] = {}   # the last step's rivals of its lead (passed its tests), by candidate
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if current is not nominal and judge.heldout(current).ci95[0] <= 1.0:
             # at the noise floor; not tested on the nominal fit: the gap tests opened the diagnosis, and the
@@ -66,9 +71,16 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         # causes), and the candidates behind them must still be tried
         for first in range(0, max(len(pool), 1), MAX_TRIED):
             names = pool[first:first + MAX_TRIED] + (again if first == 0 else [])
-            reuse = {n: screen_fits[n] for n in names if current is nominal and screen_fits and n in screen_fits
-                     and screen_fits[n].extra.get("converged")}
-            fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40)
+            screened_fits = screen_fits if current is nominal and screen_fits else {}
+            reuse = {n: f for n in names if (f := screened_fits.get(n)) is not None and f.extra.get("converged")}
+            # an unconverged screening fit (the same problem) goes on from where it stopped; a rival of the last
+            # step's lead (it passed there and explained at least RIVAL_SHARE of what the lead did in-sample: much
+            # the same misfit) is also fitted from its fit there, the lead carried over: started only from the lead's
+            # fit, their joint fit can stay in the lead's basin with the rival at a sliver
+            starts: dict[str, list[Start | None]] = {n: [screened_fits[n].values()] for n in names
+                                                      if n in screened_fits}
+            starts |= {n: [None, carried_start(current, passed[n], n)] for n in names if n in passed}
+            fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40, starts)
             tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
             rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
             if passing:
@@ -84,6 +96,8 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         fits.append(current)
         alternatives.append(tried)
         pool = [n for n in pool if n != lead.name and n not in ambiguous]
+        passed = {c.name: tried[c.name] for c in passing
+                  if c.name in pool and c.improvement >= RIVAL_SHARE * lead.improvement}
         spent |= {lead.name, *ambiguous}
     return Selection(steps, fits, alternatives, rejected)
 

@@ -6,7 +6,8 @@ candidates) (Bonferroni)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy import optimize, stats
@@ -131,7 +132,17 @@ def threshold(p: Problem, name: str, scale2: float, n_candidates: int, alpha: fl
     return float(stats.chi2.ppf(1 - alpha / max(n_candidates, 1), n_params(p, name))) * scale2
 
 
-AddEach = Callable[[Fit, Sequence[str], int], dict[str, Fit]]
+Start = Mapping[tuple, float]
+
+
+class AddEach(Protocol):
+    """For each name, `base`'s effects plus that one, refitted from each of the name's `starts` (None: `base` and
+    the name's best strength on the coarse grid; the default for a name not in `starts`), the fit with the lowest
+    objective kept."""
+    def __call__(self, base: Fit, names: Sequence[str], max_nfev: int,
+                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]: ...
+
+
 GridObjectives = Callable[[Fit, Sequence[str]], dict[str, float]]
 
 
@@ -144,9 +155,27 @@ def grid_objectives_here(p: Problem) -> GridObjectives:
 
 def add_each_here(p: Problem) -> AddEach:
     """Candidate fits one after another in this process (`fitpool.FitPool.add_each` runs them side by side)."""
-    def add_each(base: Fit, names: Sequence[str], max_nfev: int) -> dict[str, Fit]:
-        return {n: p.solve(tuple(base.names) + (n,), grid_start(p, base, n), max_nfev=max_nfev) for n in names}
+    def add_each(base: Fit, names: Sequence[str], max_nfev: int,
+                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
+        return {n: min((fit_added(p, base, n, s0, max_nfev) for s0 in (starts or {}).get(n, [None])),
+                       key=lambda f: f.objective) for n in names}
     return add_each
+
+
+def fit_added(p: Problem, base: Fit, name: str, start: Start | None, max_nfev: int) -> Fit:
+    """`base`'s effects plus `name`, fitted from `start` (None: from `base` and `name`'s grid start)."""
+    return p.solve(tuple(base.names) + (name,), dict(start) if start is not None else grid_start(p, base, name),
+                   max_nfev=max_nfev)
+
+
+def carried_start(base: Fit, other: Fit, name: str) -> dict[tuple, float]:
+    """`base`'s values with `name`'s own parameters (strength, shapes) as `other` fitted them, and whatever else
+    `other` has that `base` lacks (a field effect's plates). Two effects that explain overlapping parts of the gap
+    (a d31 curve and a hysteresis both bend the stroke against amplitude) can leave their joint fit started from
+    one's fit in that one's basin, with the other at a sliver of its strength."""
+    theirs = other.values()
+    own = {k: v for k, v in theirs.items() if k[0] in ("strength", "shape") and k[1] == name}
+    return {**theirs, **base.values(), **own}
 
 
 def screen(p: Problem, nominal: Fit, names: list[str], add_each: AddEach | None = None
