@@ -56,7 +56,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     current = nominal
     rejected: list[StepCandidate] = []
     spent: set[str] = set()   # named, alone or in an ambiguous set
-    passed: dict[str, Fit] = {}   # the last step's rivals of its lead (passed its tests), by candidate
+    rivals: dict[str, Fit] = {}   # the last step's rivals of its lead: their fits there, by candidate
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if current is not nominal and judge.heldout(current).ci95[0] <= 1.0:
             # at the noise floor; not tested on the nominal fit: the gap tests opened the diagnosis, and the
@@ -78,8 +78,8 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
             # the same misfit) is also fitted from its fit there, the lead carried over: started only from the lead's
             # fit, their joint fit can stay in the lead's basin with the rival at a sliver
             starts: dict[str, list[Start | None]] = {n: [screened_fits[n].values()] for n in names
-                                                      if n in screened_fits}
-            starts |= {n: [None, carried_start(current, passed[n], n)] for n in names if n in passed}
+                                                      if n in screened_fits and n not in reuse}
+            starts |= {n: [None, carried_start(current, rivals[n], n)] for n in names if n in rivals}
             fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40, starts)
             tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
             rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
@@ -96,7 +96,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         fits.append(current)
         alternatives.append(tried)
         pool = [n for n in pool if n != lead.name and n not in ambiguous]
-        passed = {c.name: tried[c.name] for c in passing
+        rivals = {c.name: tried[c.name] for c in passing
                   if c.name in pool and c.improvement >= RIVAL_SHARE * lead.improvement}
         spent |= {lead.name, *ambiguous}
     return Selection(steps, fits, alternatives, rejected)
