@@ -123,9 +123,21 @@ class Diagnosis:
     fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
 
     def ranking(self) -> list[dict[str, Any]]:
-        """Named effects first (waterfall order), then every other candidate with its screening figures."""
-        out = [e.to_json() for e in self.named]
+        """Named effects first (waterfall order), each ambiguous one followed by the others of its set (the
+        data support them as well, so they rank beside it, not among the candidates turned down), then every
+        other candidate with its screening figures."""
+        out: list[dict[str, Any]] = []
         seen = {e.name for e in self.named}
+        steps = {w.added: w for w in self.waterfall if w.added is not None}
+        for e in self.named:
+            out.append(e.to_json())
+            step = steps.get(e.name)
+            for member in e.ambiguous_with:
+                row = next((c for c in step.tried if c.name == member), None) if step else None
+                if row is None or member in seen:
+                    continue   # a timing lag is a sensor chain's parameter, not a candidate; or named already
+                seen.add(member)
+                out.append(_set_member_entry(e, row))
         for s in sorted(self.screening, key=lambda s: -s.improvement):
             if s.name in seen:
                 continue
@@ -147,6 +159,20 @@ class Diagnosis:
                 "heldout_units": "noise units (z = held-out residual / pure-error standard error / the nominal "
                                  "fit's predictive spread there, the same for every model); 1 = the noise floor",
                 "recordings": self.recordings, "elapsed_s": self.elapsed_s}
+
+
+def _set_member_entry(named: NamedEffect, row: StepCandidate) -> dict[str, Any]:
+    """A member of `named`'s ambiguous set, as its step tried it: added in `named`'s place, it did as well. Its
+    strength is that fit's (no joint-fit interval: the joint fit holds `named`); what would separate them is on
+    `named`'s entry and in `cannot_separate`."""
+    others = [named.name] + [m for m in named.ambiguous_with if m != row.name]
+    before = named.heldout_before
+    return {"effect": row.name, "verdict": "ambiguous", "strength": row.strength, "unit": FAMILIES[row.name].unit,
+            "strength_ci95": None, "shapes": {}, "heldout_rms_before": before,
+            "heldout_rms_after": row.heldout.rms,
+            "reduction": 1.0 - row.heldout.rms / before if before > 0 else 0.0,
+            "reduction_ci95": list(row.reduction_ci95), "closed_fraction": None, "confusable_with": others,
+            "in_set_of": named.name, "improvement_chi2": row.improvement}
 
 
 def closed_share_text(fraction: float | None, of: str = "") -> str:
