@@ -10,7 +10,7 @@ import json
 import os
 from pathlib import Path
 
-from analysis.gap.results import closed_share_text
+from analysis.gap.results import best_text, closed_share_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -79,7 +79,7 @@ def format_text(result: dict) -> str:
     rest = result["unexplained"]
     lines += ["", f"left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise"
               + (" (at the noise floor)" if rest["at_noise_floor"] else ""),
-              f"best: {result['best'] or 'none (no attributed effect)'}"]
+              f"best: {best_text(result)}"]
     return "\n".join(lines)
 
 

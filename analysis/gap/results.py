@@ -88,6 +88,8 @@ class NamedEffect:
     ambiguous_with: tuple[str, ...] = ()
     separated_by: tuple[str, ...] = ()
     beyond_tolerance: bool | None = None
+    # explains a real part of the gap: attributed, or ambiguous with a set that would be if it could be split
+    explains: bool = False
     notes: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
@@ -97,7 +99,7 @@ class NamedEffect:
                 "heldout_rms_after": self.heldout_after, "reduction": self.reduction,
                 "reduction_ci95": list(self.reduction_ci95), "closed_fraction": self.closed_fraction,
                 "confusable_with": list(self.ambiguous_with), "separated_by": list(self.separated_by),
-                "beyond_tolerance": self.beyond_tolerance, "notes": list(self.notes)}
+                "beyond_tolerance": self.beyond_tolerance, "explains_gap": self.explains, "notes": list(self.notes)}
 
 
 @dataclass
@@ -173,6 +175,17 @@ def _set_member_entry(named: NamedEffect, row: StepCandidate) -> dict[str, Any]:
             "reduction": 1.0 - row.heldout.rms / before if before > 0 else 0.0,
             "reduction_ci95": list(row.reduction_ci95), "closed_fraction": None, "confusable_with": others,
             "in_set_of": named.name, "improvement_chi2": row.improvement}
+
+
+def best_text(result: dict[str, Any]) -> str:
+    """`gap --json`'s `best` for people: the effect, with the others of its set where the data cannot tell them
+    apart, or why there is none."""
+    best = result.get("best")
+    if not best:
+        return "none (nothing named explains the gap)"
+    entry: dict[str, Any] = next((e for e in result.get("named", []) if e.get("effect") == best), {})
+    others = entry.get("confusable_with") or []
+    return f"{best} (ambiguous: or {', '.join(others)})" if entry.get("verdict") == "ambiguous" and others else best
 
 
 def closed_share_text(fraction: float | None, of: str = "") -> str:

@@ -106,6 +106,12 @@ def _attributed(t: Trial) -> set[str]:
     return {n for n, v in t.named.items() if v == "attributed"}
 
 
+def _answered(t: Trial) -> bool:
+    """The trial names something as the gap's cause: an attributed effect, or a `best` (which an ambiguous set
+    that would be attributed gives too)."""
+    return bool(_attributed(t)) or t.best is not None
+
+
 def _in_ambiguous_set(t: Trial, name: str) -> bool:
     return any(name in s for s in t.ambiguous_sets) or t.named.get(name) == "ambiguous"
 
@@ -135,7 +141,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "null_trials": len(nulls), "decoy_only_trials": len(decoy_only),
         "top1_single": frac(sum(t.best == t.truth[0] for t in single), len(single)),
         "top1_single_by_effect": by_effect,
-        "truth_in_ambiguous_set_single": frac(sum(t.best is None and _in_ambiguous_set(t, t.truth[0])
+        "truth_in_ambiguous_set_single": frac(sum(t.best != t.truth[0] and _in_ambiguous_set(t, t.truth[0])
                                                   for t in single), len(single)),
         "multi_effects_named": frac(sum(n in t.named and t.named[n] in ("attributed", "ambiguous")
                                         for t, n in multi_pairs), len(multi_pairs)),
@@ -144,8 +150,8 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "multi_effects_named_or_in_set": frac(sum((n in t.named and t.named[n] in ("attributed", "ambiguous"))
                                                   or _in_ambiguous_set(t, n) for t, n in multi_pairs),
                                               len(multi_pairs)),
-        "false_attribution_rate_null": frac(sum(bool(_attributed(t)) for t in nulls), len(nulls)),
-        "decoys_unexplained": frac(sum(not _attributed(t) for t in decoy_only), len(decoy_only)),
+        "false_attribution_rate_null": frac(sum(_answered(t) for t in nulls), len(nulls)),
+        "decoys_unexplained": frac(sum(not _answered(t) for t in decoy_only), len(decoy_only)),
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),
         "mean_sim_s": float(np.mean([t.sim_s for t in trials])) if trials else None,
         "mean_diagnose_s": float(np.mean([t.diagnose_s for t in trials])) if trials else None,
@@ -209,7 +215,7 @@ def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, de
             named = n in t.named and t.named[n] in ("attributed", "ambiguous")
             row = single[key] if t.kind == "single" else multi[key]
             row[0] += t.best == n if t.kind == "single" else named
-            row[1] += (t.best is None if t.kind == "single" else not named) and _in_ambiguous_set(t, n)
+            row[1] += (t.best != n if t.kind == "single" else not named) and _in_ambiguous_set(t, n)
             row[2] += 1
     return {"detection_sigmas": DETECTION_SIGMAS,
             "top1_single": {k: {"right": v[0], "in_set": v[1], "of": v[2]} for k, v in single.items()},

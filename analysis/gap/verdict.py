@@ -12,7 +12,10 @@ from the final joint fit, its share of the held-out gap, and a verdict:
   something outside the library), or its size cannot be told from none (a strength interval that includes 0; a
   drift wander whose noise-corrected interval is 0 - 0): its shape, not its size, took up a misfit.
 
-`best` is the first attributed effect in waterfall order, or null."""
+`best` is the first effect in waterfall order that explains a real part of the gap: attributed, or ambiguous where
+its set would be attributed if the data could tell its members apart (then it is the member whose addition left
+the smallest held-out gap, and its `confusable_with` the others); null where there is none. A set whose size cannot
+be told from none, or which closes too little, gives no `best`."""
 
 from __future__ import annotations
 
@@ -86,6 +89,20 @@ def lag_ambiguity(p: Problem, fit: Fit, name: str) -> float:
     return out
 
 
+def settled_verdict(name: str, ci: tuple[float, float], total_closed: float) -> tuple[str, list[str]]:
+    """The verdict a named effect would get if the data could tell it from the others of its set (`within
+    tolerance`, `attributed` or `unexplained`), with why where it is not attributed."""
+    if beyond_tolerance(name, ci) is False:
+        return "within tolerance", []
+    if _size_not_told_from_none(name, ci):
+        return "unexplained", ["the fitted wander is no more than the baseline's noise puts there (interval 0 - 0)"
+                               if FAMILIES[name].kind == "baseline" else
+                               "its strength's 95 % interval includes 0, the nominal model"]
+    if total_closed < CLOSED_MIN:
+        return "unexplained", [f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})"]
+    return "attributed", []
+
+
 def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect], str | None, list[dict]]:
     final = sel.fits[-1]
     rms0 = sel.steps[0].heldout.rms
@@ -107,31 +124,21 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
                 ambiguous.append("timing_lag")
                 notes.append(f"strength and sensor lag correlate at {rho:.2f} on one ramp rate")
         beyond = beyond_tolerance(name, ci)
-        if ambiguous:
-            verdict = "ambiguous"
-            members = [name] + ambiguous
-            cannot.append({"effects": members, "separated_by": {m: SEPARATED_BY.get(m, "") for m in members}})
-        elif beyond is False:
-            verdict = "within tolerance"
-        else:
-            verdict = "attributed"
-        if verdict == "attributed" and _size_not_told_from_none(name, ci):
-            verdict = "unexplained"
-            notes.append("the fitted wander is no more than the baseline's noise puts there (interval 0 - 0)"
-                         if FAMILIES[name].kind == "baseline" else
-                         "its strength's 95 % interval includes 0, the nominal model")
+        settled, why = settled_verdict(name, ci, total_closed)
+        notes += why
         if FAMILIES[name].kind == "baseline":
             moved_mN = p.drift_excursion_N(final.layout, final.x) * 1e3
             notes.append(f"the fitted force baseline moves by up to {moved_mN:.3g} mN within one run or shared clock")
-        if total_closed < CLOSED_MIN and verdict == "attributed":
-            verdict = "unexplained"
-            notes.append(f"the named effects close {total_closed:.0%} of the held-out gap (< {CLOSED_MIN:.0%})")
+        verdict = "ambiguous" if ambiguous else settled
+        if ambiguous:
+            members = [name] + ambiguous
+            cannot.append({"effects": members, "separated_by": {m: SEPARATED_BY.get(m, "") for m in members}})
         named.append(NamedEffect(
             name=name, verdict=verdict, strength=float(strength), strength_ci95=(float(ci[0]), float(ci[1])),
             shapes=dict(value.shapes), heldout_before=before, heldout_after=after,
             reduction=1.0 - after / before if before > 0 else 0.0, reduction_ci95=row.reduction_ci95,
             closed_fraction=(before - after) / (rms0 - 1.0) if rms0 > 1.0 else 0.0,
             ambiguous_with=tuple(ambiguous), separated_by=tuple(SEPARATED_BY.get(m, "") for m in ambiguous),
-            beyond_tolerance=beyond, notes=tuple(notes)))
-    best = next((e.name for e in named if e.verdict == "attributed"), None)
+            beyond_tolerance=beyond, explains=settled == "attributed", notes=tuple(notes)))
+    best = next((e.name for e in named if e.explains), None)
     return named, best, cannot

@@ -190,7 +190,7 @@ def test_the_scorer_reads_names_pairs_and_refusals():
     assert score.judge(null) == "ambiguous" and null.ambiguous_set == ["creep", "hysteresis"]
     line = "hamr-bench: error: f.csv:3: bad"
     assert score._reason(f"Traceback...\n  x\n{line}\n") == line
-    # the issue-16 shape: a `named` list with verdicts, `best` the first attributed one
+    # the issue-16 shape: a `named` list with verdicts, `best` the first that explains the gap
     single = score.CaseResult("s", "single", ["grounding"])
     score.read_answer(single, {"best": "grounding_lengthening", "named": [
         {"effect": "grounding_lengthening", "verdict": "attributed"},

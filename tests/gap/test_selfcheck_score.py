@@ -31,6 +31,23 @@ def test_top1_needs_the_truth_attributed_first_and_nulls_count_attributions_only
     assert s["false_attribution_rate_null"] == pytest.approx(0.5)
 
 
+def test_an_ambiguous_best_counts_as_an_answer_right_or_wrong():
+    # `best` can be the leader of a set the data cannot split: the truth leading it is top-1, another leading it
+    # leaves the truth in the set; on a null it is a false attribution however it is labelled
+    trials = [_trial("single", ["width_loss"], best="width_loss", named={"width_loss": "ambiguous"},
+                     sets=[["width_loss", "base_compliance"]]),
+              _trial("single", ["width_loss"], best="base_compliance", named={"base_compliance": "ambiguous"},
+                     sets=[["base_compliance", "width_loss"]]),
+              _trial("null", [], best="base_compliance", named={"base_compliance": "ambiguous"},
+                     sets=[["base_compliance", "sensor_compliance"]]),
+              _trial("null", [], named={"base_compliance": "ambiguous"},
+                     sets=[["base_compliance", "sensor_compliance"]])]
+    s = score(trials)
+    assert s["top1_single"] == pytest.approx(0.5)
+    assert s["truth_in_ambiguous_set_single"] == pytest.approx(0.5)
+    assert s["false_attribution_rate_null"] == pytest.approx(0.5)
+
+
 def test_detectability_splits_by_how_far_a_hidden_effect_moves_the_specimens_mean_gains():
     from analysis.gap.selfcheck import DETECTION_SIGMAS, _draw_pool, detectability_breakdown, gain_sigmas
     from sim_devices.scenarios import draw_scenario
