@@ -140,5 +140,9 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
             closed_fraction=(before - after) / (rms0 - 1.0) if rms0 > 1.0 else 0.0,
             ambiguous_with=tuple(ambiguous), separated_by=tuple(SEPARATED_BY.get(m, "") for m in ambiguous),
             beyond_tolerance=beyond, explains=settled == "attributed", notes=tuple(notes)))
-    best = next((e.name for e in named if e.explains), None)
-    return named, best, cannot
+    return named, best_of(named), cannot
+
+
+def best_of(named: list[NamedEffect]) -> str | None:
+    """The first named effect (waterfall order) that explains a real part of the gap, ambiguous or not."""
+    return next((e.name for e in named if e.explains), None)
