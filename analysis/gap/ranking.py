@@ -5,19 +5,22 @@ whose held-out reduction's bootstrap interval is above 0, the one that lowers th
 Candidates whose addition is as good on both counts are named with it as one ambiguous set. A rival of a step's
 lead (it passed there too and explained at least half as much in-sample) is fitted at the next step from its own
 fit as well as from the lead's, and the better fit kept: two effects that explain much the same misfit can leave
-their joint fit in whichever basin it started from. The selection stops
-when nothing passes, when the held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The
-waterfall is the held-out gap after each addition."""
+their joint fit in whichever basin it started from. When none passes alone, two may pass together
+(`joint_entry`): both are named, as two bars of the waterfall. The selection stops when nothing passes, when the
+held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The waterfall is the held-out gap
+after each addition."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy import stats
 
 from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge
+from analysis.gap.joint_entry import joint_entry
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
 from analysis.gap.screening import (AddEach, GridObjectives, Start, add_each_here, carried_start,
@@ -86,8 +89,25 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
             if passing:
                 break
         if not passing:
-            rejected = rows
-            break
+            bar = partial(_step_bar, p, scale2, len(pool))
+            joint = joint_entry(p, current, rows, tried, judge, add_each or add_each_here(p), bar, STEP_ALPHA,
+                                scale2) if len(current.names) + 2 <= MAX_EFFECTS else None
+            if joint is None:
+                rejected = rows
+                break
+            alone = tried[joint.first]
+            for name, fit, step_rows, other in ((joint.first, alone, rows, joint.second),
+                                                (joint.second, joint.fit, [joint.row], joint.first)):
+                ho = judge.heldout(fit)
+                steps.append(WaterfallStep(name, tuple(fit.names), ho, _closed(ho0.rms, ho.rms), (), step_rows,
+                                           joint_with=(other,)))
+                fits.append(fit)
+            alternatives += [tried, {joint.second: joint.fit}]
+            current = joint.fit
+            pool = [n for n in pool if n not in (joint.first, joint.second)]
+            rivals = {}
+            spent |= {joint.first, joint.second}
+            continue
         lead = _lead(passing, tried, judge)
         ambiguous = tuple(c.name for c in rows if c.name != lead.name and _tie(c, lead, tried, judge, scale2))
         current = tried[lead.name]
@@ -117,9 +137,13 @@ def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge, n_poo
         ho, ci = judged[name]
         rows.append(StepCandidate(name, improvement(current, f, scale2), ho, ci, float(f.effects[name].strength)))
     rows.sort(key=lambda c: c.heldout.rms)
-    passing = [c for c in rows if c.reduction_ci95[0] > 0
-               and c.improvement > threshold(p, c.name, scale2, n_pool, STEP_ALPHA)]
+    passing = [c for c in rows if c.reduction_ci95[0] > 0 and c.improvement > _step_bar(p, scale2, n_pool, c.name)]
     return rows, passing, scale2
+
+
+def _step_bar(p: Problem, scale2: float, n_pool: int, name: str) -> float:
+    """A step's likelihood-ratio bar for one candidate's in-sample improvement."""
+    return threshold(p, name, scale2, n_pool, STEP_ALPHA)
 
 
 def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: set[str],

@@ -100,6 +100,16 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
     plt.close(fig)
 
 
+def _bar_label(step: dict[str, Any]) -> str:
+    """A waterfall bar's effect, with its ambiguous set and the effect it entered with (neither passed alone)."""
+    label = f"+ {step['added']}"
+    if step["ambiguous_with"]:
+        label += f"\n(or {', '.join(step['ambiguous_with'])})"
+    if step.get("joint_with"):
+        label += f"\n(entered with {', '.join(step['joint_with'])})"
+    return label
+
+
 def waterfall_png(result: dict[str, Any], path: Path) -> None:
     """Held-out RMS gap (noise units) of the nominal model and after each named effect, with 95 % bootstrap
     intervals; the noise floor (1) as a line."""
@@ -109,8 +119,7 @@ def waterfall_png(result: dict[str, Any], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     steps = result["waterfall"]
-    labels = ["nominal"] + [f"+ {w['added']}" + (f"\n(or {', '.join(w['ambiguous_with'])})" if w["ambiguous_with"]
-                                                  else "") for w in steps[1:]]
+    labels = ["nominal"] + [_bar_label(w) for w in steps[1:]]
     y = np.array([w["heldout_rms"] for w in steps])
     lo = y - np.array([w["heldout_rms_ci95"][0] for w in steps])
     hi = np.array([w["heldout_rms_ci95"][1] for w in steps]) - y

@@ -64,11 +64,13 @@ class WaterfallStep:
     closed_fraction: float        # of the nominal held-out gap above the noise floor, cumulative
     ambiguous_with: tuple[str, ...] = ()
     tried: list[StepCandidate] = field(default_factory=list)
+    joint_with: tuple[str, ...] = ()   # entered as a pair with these (neither passed alone: `joint_entry`)
 
     def to_json(self) -> dict[str, Any]:
         return {"added": self.added, "effects": list(self.effects), "heldout_rms": self.heldout.rms,
                 "heldout_rms_ci95": list(self.heldout.ci95), "closed_fraction": self.closed_fraction,
-                "ambiguous_with": list(self.ambiguous_with), "tried": [c.to_json() for c in self.tried]}
+                "ambiguous_with": list(self.ambiguous_with), "joint_with": list(self.joint_with),
+                "tried": [c.to_json() for c in self.tried]}
 
 
 @dataclass

@@ -126,6 +126,9 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
         beyond = beyond_tolerance(name, ci)
         settled, why = settled_verdict(name, ci, total_closed)
         notes += why
+        if step.joint_with:
+            notes.append(f"entered with {', '.join(step.joint_with)}: neither lowered the held-out gap alone, together "
+                         "they do, and dropping either raises it")
         if FAMILIES[name].kind == "baseline":
             moved_mN = p.drift_excursion_N(final.layout, final.x) * 1e3
             notes.append(f"the fitted force baseline moves by up to {moved_mN:.3g} mN within one run or shared clock")

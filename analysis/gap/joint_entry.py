@@ -1,0 +1,68 @@
+"""Stage 3, rank, when no single effect passes: two effects entered together. Forward selection adds one effect at a
+time, and two effects that each pull the nominal fit's shared parameters (a specimen's gains, the plates, a
+timing lag) their own way can each fail held out alone while together they close most of the gap: fitted alone,
+a leg's bias error bends the actuator parameters the legs share to absorb what a field-dependent d31 does to the
+actuators, and the actuator conditions held out get worse.
+
+So, when nothing passes at a step, the JOINT_POOL candidates with the largest in-sample improvements that each
+passed the step's likelihood-ratio bar are fitted in pairs (each pair from one member's fit with the other's own
+parameters carried over). A pair enters when its in-sample improvement passes the bar for both members' parameters
+together, its held-out reduction's bootstrap interval is above 0, and dropping either member raises the held-out
+gap (the interval of the reduction over that member alone is above 0 too): each is needed held out. Of the
+pairs that enter, the lowest held-out gap is taken."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from scipy import stats
+
+from analysis.gap.heldout import Judge
+from analysis.gap.problem import Fit, Problem
+from analysis.gap.results import StepCandidate
+from analysis.gap.screening import AddEach, carried_start, improvement, n_params
+
+JOINT_POOL = 3           # candidates paired when nothing passes alone (3 pairs)
+
+
+@dataclass
+class JointEntry:
+    """The pair that entered: `first` is the member whose fit alone left the lower held-out gap (the waterfall's
+    intermediate bar), `second` the other; `row` is the second's addition to the first, judged."""
+
+    first: str
+    second: str
+    fit: Fit
+    row: StepCandidate
+
+
+def joint_entry(p: Problem, current: Fit, rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge,
+                add_each: AddEach, bar: Callable[[str], float], alpha: float, scale2: float) -> JointEntry | None:
+    """`rows`: the step's candidates as judged (none passed); `tried`: their fits; `bar(name)`: the step's
+    likelihood-ratio threshold for one candidate. None when no pair enters."""
+    strong = sorted((c for c in rows if c.improvement > bar(c.name)), key=lambda c: -c.improvement)[:JOINT_POOL]
+    names = [c.name for c in strong]
+    pairs = list(itertools.combinations(names, 2))
+    if not pairs:
+        return None
+    fitted: dict[tuple[str, str], Fit] = {}
+    for a in names:
+        partners = [b for x, b in pairs if x == a]
+        if partners:
+            starts = {b: [carried_start(tried[a], tried[b], b)] for b in partners}
+            fitted |= {(a, b): f for b, f in add_each(tried[a], partners, 40, starts).items()}
+    entered: list[JointEntry] = []
+    for (a, b), f in fitted.items():
+        dof = n_params(p, a) + n_params(p, b)
+        pair_bar = float(stats.chi2.ppf(1 - alpha / len(pairs), dof)) * scale2
+        if improvement(current, f, scale2) <= pair_bar or judge.reduction_ci(current, f)[0] <= 0:
+            continue
+        if judge.reduction_ci(tried[a], f)[0] <= 0 or judge.reduction_ci(tried[b], f)[0] <= 0:
+            continue
+        first, second = sorted((a, b), key=lambda n: judge.heldout(tried[n]).rms)
+        row = StepCandidate(second, improvement(tried[first], f, scale2), judge.heldout(f),
+                            judge.reduction_ci(tried[first], f), float(f.effects[second].strength))
+        entered.append(JointEntry(first, second, f, row))
+    return min(entered, key=lambda e: e.row.heldout.rms, default=None)
