@@ -37,7 +37,6 @@ RIVAL_SHARE = 0.5        # a candidate explaining this share of the lead's in-sa
 class Selection:
     steps: list[WaterfallStep]
     fits: list[Fit]                      # the fit after each step (fits[0]: nominal)
-    alternatives: list[dict[str, Fit]] = field(default_factory=list)   # per named step: candidate -> its fit
     rejected: list[StepCandidate] = field(default_factory=list)      # tried after the last named step
 
 
@@ -54,7 +53,6 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
-    alternatives: list[dict[str, Fit]] = []
     pool = [s.name for s in sorted(screened, key=lambda s: -s.improvement) if s.promising]
     current = nominal
     rejected: list[StepCandidate] = []
@@ -102,7 +100,6 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
                 steps.append(WaterfallStep(name, tuple(fit.names), ho, _closed(ho0.rms, ho.rms), (), step_rows,
                                            joint_with=(other,)))
                 fits.append(fit)
-            alternatives += [tried, {joint.second: joint.fit}]
             current = joint.fit
             pool = [n for n in pool if n not in (joint.first, joint.second)]
             rivals = {}
@@ -114,12 +111,11 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         ho = judge.heldout(current)
         steps.append(WaterfallStep(lead.name, tuple(current.names), ho, _closed(ho0.rms, ho.rms), ambiguous, rows))
         fits.append(current)
-        alternatives.append(tried)
         pool = [n for n in pool if n != lead.name and n not in ambiguous]
         rivals = {c.name: tried[c.name] for c in passing
                   if c.name in pool and c.improvement >= RIVAL_SHARE * lead.improvement}
         spent |= {lead.name, *ambiguous}
-    return Selection(steps, fits, alternatives, rejected)
+    return Selection(steps, fits, rejected)
 
 
 def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge, n_pool: int,
