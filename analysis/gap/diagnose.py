@@ -155,7 +155,8 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     # forked after the nominal fit, so the workers start from its warmed caches
     with FitPool(p, jobs if gap else 1, judge) as pool:
         screened, screen_fits = screen(p, nominal, names, pool.add_each) if gap else ([], {})
-        sel = select(p, nominal, screened, judge, gap, pool.add_each_judged, screen_fits, pool.grid_objectives)
+        sel = select(p, nominal, screened, judge, gap, pool.add_each_judged, screen_fits, pool.grid_objectives,
+                     pool.add_onto)
     named, best, cannot = decide(p, sel, judge)
     final = sel.fits[-1]
     last = sel.steps[-1]

@@ -19,7 +19,7 @@ from typing import Any
 
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
-from analysis.gap.screening import Start, add_each_here, fit_added, grid_objectives_here
+from analysis.gap.screening import Start, add_each_here, add_onto_here, fit_added, grid_objectives_here
 from analysis.parallel import one_blas_thread
 
 _PROBLEM: Problem | None = None      # the problem a forked worker inherited
@@ -80,6 +80,14 @@ class FitPool:
             if n not in out or fit.objective < out[n].objective:
                 out[n] = fit
         return {n: out[n] for n in names}
+
+    def add_onto(self, tasks: Sequence[tuple[Fit, str, Start]], max_nfev: int) -> list[Fit]:
+        """`screening.AddOnto`: each task's name added to its own base, side by side, each fit with its held-out
+        z (`joint_entry`'s pairs)."""
+        if self._pool is None or len(tasks) < 2:
+            return add_onto_here(self.p)(tasks, max_nfev)
+        done = self._pool.map(_add_one, [(base, n, s0, max_nfev, True) for base, n, s0 in tasks])
+        return [fit for fit, _ in done]
 
     def grid_objectives(self, base: Fit, names: Sequence[str]) -> dict[str, float]:
         """Each candidate's best objective on its coarse grid added to `base` (`screening.grid_best`)."""

@@ -22,7 +22,7 @@ from scipy import stats
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import StepCandidate
-from analysis.gap.screening import AddEach, carried_start, improvement, n_params
+from analysis.gap.screening import AddOnto, carried_start, improvement, n_params
 
 JOINT_POOL = 3           # candidates paired when nothing passes alone (3 pairs)
 
@@ -39,7 +39,7 @@ class JointEntry:
 
 
 def joint_entry(p: Problem, current: Fit, rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge,
-                add_each: AddEach, bar: Callable[[str], float], alpha: float, scale2: float) -> JointEntry | None:
+                add_onto: AddOnto, bar: Callable[[str], float], alpha: float, scale2: float) -> JointEntry | None:
     """`rows`: the step's candidates as judged (none passed); `tried`: their fits; `bar(name)`: the step's
     likelihood-ratio threshold for one candidate. None when no pair enters."""
     strong = sorted((c for c in rows if c.improvement > bar(c.name)), key=lambda c: -c.improvement)[:JOINT_POOL]
@@ -47,14 +47,9 @@ def joint_entry(p: Problem, current: Fit, rows: list[StepCandidate], tried: dict
     pairs = list(itertools.combinations(names, 2))
     if not pairs:
         return None
-    fitted: dict[tuple[str, str], Fit] = {}
-    for a in names:
-        partners = [b for x, b in pairs if x == a]
-        if partners:
-            starts = {b: [carried_start(tried[a], tried[b], b)] for b in partners}
-            fitted |= {(a, b): f for b, f in add_each(tried[a], partners, 40, starts).items()}
+    fits = add_onto([(tried[a], b, carried_start(tried[a], tried[b], b)) for a, b in pairs], 40)
     entered: list[JointEntry] = []
-    for (a, b), f in fitted.items():
+    for (a, b), f in zip(pairs, fits, strict=True):
         dof = n_params(p, a) + n_params(p, b)
         pair_bar = float(stats.chi2.ppf(1 - alpha / len(pairs), dof)) * scale2
         if improvement(current, f, scale2) <= pair_bar or judge.reduction_ci(current, f)[0] <= 0:

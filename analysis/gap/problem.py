@@ -497,6 +497,7 @@ class Problem:
                           ftol=1e-6, xtol=1e-6)
         fit = self._fit(lay, r.x, r.fun, r.jac)
         fit.extra["converged"] = bool(r.status > 0)    # a tolerance met, not stopped by max_nfev
+        fit.extra["nfev"] = int(r.nfev)
         return fit
 
     def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:

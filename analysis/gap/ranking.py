@@ -23,8 +23,8 @@ from analysis.gap.heldout import Judge
 from analysis.gap.joint_entry import joint_entry
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut, Screened, StepCandidate, WaterfallStep
-from analysis.gap.screening import (AddEach, GridObjectives, Start, add_each_here, carried_start,
-                                    grid_objectives_here, improvement, overdispersion, threshold)
+from analysis.gap.screening import (AddEach, AddOnto, GridObjectives, Start, add_each_here, add_onto_here,
+                                    carried_start, grid_objectives_here, improvement, overdispersion, threshold)
 
 MAX_EFFECTS = 4
 MAX_TRIED = 4            # promising candidates tried at each step (by screening improvement)
@@ -46,10 +46,10 @@ def _closed(before: float, after: float) -> float:
 
 def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap: bool,
            add_each: AddEach | None = None, screen_fits: dict[str, Fit] | None = None,
-           grid_objectives: GridObjectives | None = None) -> Selection:
+           grid_objectives: GridObjectives | None = None, add_onto: AddOnto | None = None) -> Selection:
     """`screen_fits`: the screening's fits (nominal + one candidate); at the first step a converged one is that
-    step's fit of its candidate (the same problem), not fitted again. `add_each` and `grid_objectives`: where the
-    candidates' fits and coarse grids run (`fitpool.FitPool`: side by side)."""
+    step's fit of its candidate (the same problem), not fitted again. `add_each`, `grid_objectives` and
+    `add_onto`: where the candidates' fits, coarse grids and pairs run (`fitpool.FitPool`: side by side)."""
     ho0 = judge.heldout(nominal)
     steps = [WaterfallStep(None, (), ho0, 0.0)]
     fits = [nominal]
@@ -88,7 +88,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
                 break
         if not passing:
             bar = partial(_step_bar, p, scale2, len(pool))
-            joint = joint_entry(p, current, rows, tried, judge, add_each or add_each_here(p), bar, STEP_ALPHA,
+            joint = joint_entry(p, current, rows, tried, judge, add_onto or add_onto_here(p), bar, STEP_ALPHA,
                                 scale2) if len(current.names) + 2 <= MAX_EFFECTS else None
             if joint is None:
                 rejected = rows

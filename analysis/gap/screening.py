@@ -144,6 +144,15 @@ class AddEach(Protocol):
 
 
 GridObjectives = Callable[[Fit, Sequence[str]], dict[str, float]]
+# one fit per (base, name, start): that name added to that base (different bases, unlike AddEach)
+AddOnto = Callable[[Sequence[tuple[Fit, str, Start]], int], list[Fit]]
+
+
+def add_onto_here(p: Problem) -> AddOnto:
+    """`AddOnto` one fit after another in this process (`fitpool.FitPool.add_onto`: side by side)."""
+    def add_onto(tasks: Sequence[tuple[Fit, str, Start]], max_nfev: int) -> list[Fit]:
+        return [fit_added(p, base, name, start, max_nfev) for base, name, start in tasks]
+    return add_onto
 
 
 def grid_objectives_here(p: Problem) -> GridObjectives:

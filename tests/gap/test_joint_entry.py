@@ -52,13 +52,13 @@ def _one_parameter_each(monkeypatch):
 
 
 def _pair_fitter(objectives: dict[frozenset, float]):
-    def add_each(base, names, max_nfev, starts=None):
-        out = {}
-        for n in names:
+    def add_onto(tasks, max_nfev):
+        out = []
+        for base, n, _start in tasks:
             key = frozenset(base.names + (n,))
-            out[n] = _Fit(base.names + (n,), objectives[key], {m: _Effect(0.5) for m in key})
+            out.append(_Fit(base.names + (n,), objectives[key], {m: _Effect(0.5) for m in key}))
         return out
-    return add_each
+    return add_onto
 
 
 NOMINAL = _Fit((), 10_000.0)
