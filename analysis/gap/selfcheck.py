@@ -57,6 +57,7 @@ class Trial:
     strength_ci95: dict[str, list[float]] = field(default_factory=dict)
     sim_s: float = 0.0
     diagnose_s: float = 0.0
+    joint: list[list[str]] = field(default_factory=list)   # pairs that entered together (`joint_entry`)
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -99,7 +100,17 @@ def run_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.
         best=result.best, named={e.name: e.verdict for e in result.named},
         ambiguous_sets=[list(s["effects"]) for s in result.cannot_separate],
         strength_ci95={e.name: [float(x) for x in e.strength_ci95] for e in result.named},
-        sim_s=t1 - t0, diagnose_s=t2 - t1)
+        sim_s=t1 - t0, diagnose_s=t2 - t1, joint=joint_pairs(result.waterfall))
+
+
+def joint_pairs(waterfall: list[Any]) -> list[list[str]]:
+    """The pairs of a waterfall that entered together, each once, in waterfall order."""
+    out: list[list[str]] = []
+    for step in waterfall:
+        pair = sorted([str(step.added), *step.joint_with]) if step.joint_with else None
+        if pair and pair not in out:
+            out.append(pair)
+    return out
 
 
 def _attributed(t: Trial) -> set[str]:
@@ -155,6 +166,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),
         "mean_sim_s": float(np.mean([t.sim_s for t in trials])) if trials else None,
         "mean_diagnose_s": float(np.mean([t.diagnose_s for t in trials])) if trials else None,
+        "trials_with_a_joint_entry": sum(bool(t.joint) for t in trials),
     }
 
 

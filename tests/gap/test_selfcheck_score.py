@@ -80,3 +80,19 @@ def test_detectability_splits_by_how_far_a_hidden_effect_moves_the_specimens_mea
     assert rows["gain_below_limit"] == {"right": 0, "in_set": 0, "of": 1}
     assert rows["gain_above_limit"] == {"right": 0, "in_set": 1, "of": 1}
     assert rows["other"] == {"right": 1, "in_set": 0, "of": 1}
+
+
+def test_a_pair_entered_together_is_recorded_once_and_counted():
+    from analysis.gap.results import HeldOut, WaterfallStep
+    from analysis.gap.selfcheck import joint_pairs
+
+    ho = HeldOut(1.0, (0.9, 1.1))
+    waterfall = [WaterfallStep(None, (), ho, 0.0),
+                 WaterfallStep("field_dependent_d31", ("field_dependent_d31",), ho, 0.1, joint_with=("bias_error",)),
+                 WaterfallStep("bias_error", ("field_dependent_d31", "bias_error"), ho, 0.8,
+                               joint_with=("field_dependent_d31",)),
+                 WaterfallStep("hysteresis", ("field_dependent_d31", "bias_error", "hysteresis"), ho, 0.9)]
+    assert joint_pairs(waterfall) == [["bias_error", "field_dependent_d31"]]
+    trials = [_trial("multi", ["hysteresis"]), _trial("multi", ["creep"])]
+    trials[0].joint = joint_pairs(waterfall)
+    assert score(trials)["trials_with_a_joint_entry"] == 1
