@@ -17,12 +17,10 @@ import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from scipy import stats
-
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import StepCandidate
-from analysis.gap.screening import AddOnto, carried_start, improvement, n_params
+from analysis.gap.screening import AddOnto, carried_start, improvement, lr_bar, n_params
 
 JOINT_POOL = 3           # candidates paired when nothing passes alone (3 pairs)
 
@@ -50,14 +48,14 @@ def joint_entry(p: Problem, current: Fit, rows: list[StepCandidate], tried: dict
     fits = add_onto([(tried[a], b, carried_start(tried[a], tried[b], b)) for a, b in pairs], 40)
     entered: list[JointEntry] = []
     for (a, b), f in zip(pairs, fits, strict=True):
-        dof = n_params(p, a) + n_params(p, b)
-        pair_bar = float(stats.chi2.ppf(1 - alpha / len(pairs), dof)) * scale2
+        pair_bar = lr_bar(n_params(p, a) + n_params(p, b), scale2, len(pairs), alpha)
         if improvement(current, f, scale2) <= pair_bar or judge.reduction_ci(current, f)[0] <= 0:
             continue
-        if judge.reduction_ci(tried[a], f)[0] <= 0 or judge.reduction_ci(tried[b], f)[0] <= 0:
+        over_alone = {n: judge.reduction_ci(tried[n], f) for n in (a, b)}   # each dropped in turn
+        if min(ci[0] for ci in over_alone.values()) <= 0:
             continue
         first, second = sorted((a, b), key=lambda n: judge.heldout(tried[n]).rms)
-        row = StepCandidate(second, improvement(tried[first], f, scale2), judge.heldout(f),
-                            judge.reduction_ci(tried[first], f), float(f.effects[second].strength))
+        row = StepCandidate(second, improvement(tried[first], f, scale2), judge.heldout(f), over_alone[first],
+                            float(f.effects[second].strength))
         entered.append(JointEntry(first, second, f, row))
     return min(entered, key=lambda e: e.row.heldout.rms, default=None)

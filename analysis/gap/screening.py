@@ -129,7 +129,12 @@ def improvement(before: Fit, after: Fit, scale2: float) -> float:
 
 def threshold(p: Problem, name: str, scale2: float, n_candidates: int, alpha: float = SCREEN_ALPHA) -> float:
     """The likelihood-ratio test's bar for candidate `name` among n_candidates (Bonferroni), x over-dispersion."""
-    return float(stats.chi2.ppf(1 - alpha / max(n_candidates, 1), n_params(p, name))) * scale2
+    return lr_bar(n_params(p, name), scale2, n_candidates, alpha)
+
+
+def lr_bar(dof: int, scale2: float, n_tests: int, alpha: float) -> float:
+    """The likelihood-ratio bar for `dof` added parameters, one of n_tests (Bonferroni), x over-dispersion."""
+    return float(stats.chi2.ppf(1 - alpha / max(n_tests, 1), dof)) * scale2
 
 
 Start = Mapping[tuple, float]
