@@ -83,10 +83,31 @@ def _zoh(t_cmd: np.ndarray, v_cmd: np.ndarray, t: np.ndarray, before: float = 0.
 
 
 def _keep(cache: dict, key: Any, value: Any) -> None:
-    """Add to a small first-in-first-out cache of AT_CACHE entries."""
+    """Add to a small least-recently-used cache of AT_CACHE entries (`_recall` marks a hit as used)."""
     if len(cache) >= AT_CACHE:
         cache.pop(next(iter(cache)))
     cache[key] = value
+
+
+def _recall(cache: dict, key: Any) -> Any:
+    """A `_keep` cache's entry (None if absent), moved to the back: a Jacobian comes back to the unperturbed
+    point's entry between its columns, and first-in-first-out would drop it while it is still in use."""
+    value = cache.pop(key, None)
+    if value is not None:
+        cache[key] = value
+    return value
+
+
+@dataclass(frozen=True)
+class _PlateDrive:
+    """One plate's drive (full scale 1) at the dense grid's samples where it changes: split at 0 V (`above` =
+    max(x, 0), `below` = x - above), its play memory there, and per dense sample the change it holds
+    (`sample_of`)."""
+
+    above: np.ndarray
+    below: np.ndarray
+    memory: np.ndarray
+    sample_of: np.ndarray
 
 
 class _Staircase:
@@ -102,8 +123,12 @@ class _Staircase:
         if self.t.size == 0:
             return self.before * t
         i = np.searchsorted(self.t, t, "right") - 1
-        k = np.clip(i, 0, None)
-        return np.where(i >= 0, self._at[k] + self.v[k] * (t - self.t[k]), self.before * (t - self.t[0]))
+        k = np.maximum(i, 0)
+        out = self._at[k] + self.v[k] * (t - self.t[k])
+        before = i < 0
+        if before.any():   # rare (a lag reaching before the first command): not computed for every sample
+            out[before] = self.before * (t[before] - self.t[0])
+        return out
 
     def mean(self, start: np.ndarray, width: float) -> np.ndarray:
         return (self.integral(start + width) - self.integral(start)) / width
@@ -211,7 +236,8 @@ class RunEngine:
         self._settle_s, self._ahead_s = (0.0, INFERRED_RAMP_DT_S) if inferred else (SETTLE_S, 0.0)
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
-        self._memory: list[np.ndarray] | None = None
+        self._plate_voltages: np.ndarray | None = None
+        self._plate_drive: list[_PlateDrive] | None = None
         self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
@@ -269,15 +295,33 @@ class RunEngine:
             for v in (vd, vb - vd):
                 levels, where = np.unique(v, return_inverse=True)
                 self._plate_levels.append((levels, op.log_magnitude(levels), where))
-        return np.stack([op.plate_gain(levels, t_p, d31.strength, knee, p, ref, log_v)[where]
-                         for levels, log_v, where in self._plate_levels])
+        out = np.empty((2, self.dense_t.size))
+        for row, (levels, log_v, where) in zip(out, self._plate_levels, strict=True):
+            np.take(op.plate_gain(levels, t_p, d31.strength, knee, p, ref, log_v), where, out=row)
+        return out
 
-    def _plate_memory(self) -> list[np.ndarray]:
-        """Each plate's play memory (`operators.plate_memory`): it depends on the drive alone, so it is computed
-        once per run and kept outside the size-limited memo."""
-        if self._memory is None:
-            self._memory = [op.plate_memory(v / FULL_SCALE_V) for v in (self.dense_vd, self.dense_vb - self.dense_vd)]
-        return self._memory
+    def _plates(self) -> np.ndarray:
+        """Each plate's voltage on the dense grid, [V_drive, V_bias - V_drive] (shape (2, n), read-only)."""
+        if self._plate_voltages is None:
+            self._plate_voltages = np.stack([self.dense_vd, self.dense_vb - self.dense_vd])
+            self._plate_voltages.flags.writeable = False
+        return self._plate_voltages
+
+    def _plate_drives(self) -> list[_PlateDrive]:
+        """Each plate's drive on the dense grid, at its changes only, with its play memory there
+        (`operators.plate_memory`): it depends on the drive alone, so it is built once per run and kept outside the
+        size-limited memo. A play is rate-independent: a sample that repeats the one before it changes nothing, and
+        a staircase drive repeats itself in ~3 of 4 samples, which the loops are then not evaluated on."""
+        if self._plate_drive is None:
+            self._plate_drive = []
+            for v in (self.dense_vd, self.dense_vb - self.dense_vd):
+                x = v / FULL_SCALE_V
+                changes = np.r_[True, x[1:] != x[:-1]]
+                xs = x[changes]
+                above = np.maximum(xs, 0.0)
+                self._plate_drive.append(_PlateDrive(above, xs - above, op.plate_memory(xs),
+                                                     np.cumsum(changes) - 1))
+        return self._plate_drive
 
     @staticmethod
     def _drive_key(effects: Effects, t_p: float) -> tuple:
@@ -295,7 +339,7 @@ class RunEngine:
         Both are kept for the last few keys: a Jacobian's columns for gains, contact shifts and drift coefficients
         leave the lags and the drive alone, and those for the drive effects leave the lags alone."""
         key = (times, lags) + self._drive_key(effects, t_p)
-        y = self._at.get(key)
+        y = _recall(self._at, key)
         if y is None:
             y = self._played_at(times, te, lags)
             if any(FAMILIES[n].kind == "drive" for n in effects):
@@ -305,7 +349,7 @@ class RunEngine:
 
     def _played_at(self, times: str, te: np.ndarray, lags: tuple[float, float]) -> np.ndarray:
         """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times."""
-        y = self._played.get((times, lags))
+        y = _recall(self._played, (times, lags))
         if y is None:
             start, w = te - self._settle_s, self._settle_s + self._ahead_s
             y = 2.0 * self._drive.mean(start, w) - self._bias.mean(start, w)
@@ -315,10 +359,11 @@ class RunEngine:
     def _plate_loops(self, strength: float, gamma: float, tip: float) -> np.ndarray:
         """Each plate's voltage through its hysteresis on the dense grid (shape (2, n), V)."""
         w = op.plate_weights(strength, gamma, tip)
-        memory = self._plate_memory()
-        vd, vt = self.dense_vd, self.dense_vb - self.dense_vd
-        return FULL_SCALE_V * np.stack([op.plate_hysteresis(vd / FULL_SCALE_V, memory[0], w, tip),
-                                        op.plate_hysteresis(vt / FULL_SCALE_V, memory[1], w, tip)])
+        out = np.empty((2, self.dense_t.size))
+        for row, d in zip(out, self._plate_drives(), strict=True):
+            np.take(op.plate_hysteresis_split(d.above, d.below, d.memory, w, tip), d.sample_of, out=row)
+        out *= FULL_SCALE_V
+        return out
 
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """Per plate: its voltage, through its hysteresis (the switching thresholds are fields: the plate's own
@@ -327,8 +372,7 @@ class RunEngine:
         d31 = effects.get("field_dependent_d31")
         hy = effects.get("hysteresis")
         cr = effects.get("creep")
-        vd, vt = self.dense_vd, self.dense_vb - self.dense_vd
-        plates = np.stack([vd, vt])
+        plates = self._plates()
         h_key = None
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
@@ -438,7 +482,7 @@ class RunEngine:
 
             def held(offset_m: float) -> HeldFoot:
                 key = where + (offset_m,)
-                pose = self._held.get(key)
+                pose = _recall(self._held, key)
                 if pose is None:
                     pose = p.hold_foot(h + offset_m)
                     _keep(self._held, key, pose)

@@ -2,11 +2,12 @@
 fits every promising candidate on the effects named so far; those fits are independent of each other, so with
 `jobs` > 1 they run in worker processes (each on one BLAS thread), the slowest first. The workers are forked once
 the problem is built and inherit it (nothing large is sent to them); each returns its `Fit`. The fits are the same
-numbers as in one process (a fit depends on its start and the data only), so the diagnosis does not depend on
-`jobs`. A selection step's fits also get their held-out z in the worker (`add_each_judged`: the judge's folds
-are the problem's, inherited the same way), which the main process would otherwise compute one fit after
-another while the workers wait. Where fork is not available (Windows, macOS by default) the fits run in this
-process."""
+numbers as in one process (a fit depends on its start and the data only; a fit made in this process runs on one
+BLAS thread too, as the workers' do: a thread count changes an SVD's last digits, and a fit stopped at its
+evaluation limit carries them on), so the diagnosis does not depend on `jobs`. A selection step's fits also get
+their held-out z in the worker (`add_each_judged`: the judge's folds are the problem's, inherited the same way),
+which the main process would otherwise compute one fit after another while the workers wait. Where fork is not
+available (Windows, macOS by default) the fits run in this process."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ import time
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
+
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import Fit, Problem
@@ -69,7 +72,8 @@ class FitPool:
                   starts: Mapping[str, Sequence[Start | None]], judged: bool) -> dict[str, Fit]:
         tasks = [(n, s0) for n in names for s0 in starts.get(n, [None])]
         if self._pool is None or len(tasks) < 2:
-            return add_each_here(self.p)(base, names, max_nfev, starts)
+            with threadpool_limits(limits=1):
+                return add_each_here(self.p)(base, names, max_nfev, starts)
         # longest first (by what each candidate's last fit took; a new one counts as longest): the step waits for
         # its slowest fit, so that one should not start last
         tasks.sort(key=lambda t: -self._took.get(t[0], math.inf))
@@ -85,14 +89,16 @@ class FitPool:
         """`screening.AddOnto`: each task's name added to its own base, side by side, each fit with its held-out
         z (`joint_entry`'s pairs)."""
         if self._pool is None or len(tasks) < 2:
-            return add_onto_here(self.p)(tasks, max_nfev)
+            with threadpool_limits(limits=1):
+                return add_onto_here(self.p)(tasks, max_nfev)
         done = self._pool.map(_add_one, [(base, n, s0, max_nfev, True) for base, n, s0 in tasks])
         return [fit for fit, _ in done]
 
     def grid_objectives(self, base: Fit, names: Sequence[str]) -> dict[str, float]:
         """Each candidate's best objective on its coarse grid added to `base` (`screening.grid_best`)."""
         if self._pool is None or len(names) < 2:
-            return grid_objectives_here(self.p)(base, names)
+            with threadpool_limits(limits=1):
+                return grid_objectives_here(self.p)(base, names)
         return dict(zip(names, self._pool.map(_grid_one, [(base, n) for n in names]), strict=True))
 
     def close(self) -> None:

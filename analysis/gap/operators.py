@@ -106,8 +106,15 @@ def plate_hysteresis(x: np.ndarray, memory: np.ndarray, weights: np.ndarray, tip
     `tip_share` c mixes in the unmapped P, whose partial cycles also peak off the line (an amplitude-dependent
     gain): (1 - c) T + c P. Beyond 0 V the plate is linear."""
     xc = np.maximum(np.asarray(x, dtype=float), 0.0)
+    return plate_hysteresis_split(xc, np.asarray(x, dtype=float) - xc, memory, weights, tip_share)
+
+
+def plate_hysteresis_split(above: np.ndarray, below: np.ndarray, memory: np.ndarray, weights: np.ndarray,
+                           tip_share: float) -> np.ndarray:
+    """`plate_hysteresis` of x given as max(x, 0) and x - max(x, 0): a fit evaluates one plate's loops at many
+    weights, and the split depends on its drive alone."""
     g1 = 1.0 - 2.0 * float(weights @ plate_radii())
-    return _read_back((xc - weights @ memory) / g1, weights, tip_share) + (np.asarray(x, dtype=float) - xc)
+    return _read_back((above - weights @ memory) / g1, weights, tip_share) + below
 
 
 def hysteresis_loop_gap(weights: np.ndarray, tip_share: float, points: int = 401) -> float:

@@ -68,6 +68,7 @@ class Layout:
     n_rows: int
     n_prior: int
     sparsity: object = None
+    plan: _ResidualPlan | None = field(default=None, repr=False, compare=False)   # index arrays (`Problem._plan`)
 
     def vector(self, values: dict[tuple, float] | None = None) -> np.ndarray:
         values = values or {}
@@ -80,6 +81,19 @@ class Layout:
 
     def values(self, x: np.ndarray) -> dict[tuple, float]:
         return {(p.kind,) + p.key: float(v) for p, v in zip(self.params, x, strict=True)}
+
+
+@dataclass(frozen=True)
+class _ResidualPlan:
+    """A layout's prior rows and drift baselines as index arrays into its parameter vector (`Problem._plan`)."""
+
+    gains: list[tuple[np.ndarray, int, int]]   # each specimen group's whitening and its two gains
+    point: np.ndarray                          # shape and plate parameters, in parameter order
+    point_centre: np.ndarray
+    point_scale: np.ndarray
+    smooth: list[tuple[np.ndarray, float]]     # each baseline's smoothed coefficients and their second-difference sd
+    ridge: np.ndarray                          # every drift coefficient
+    drift: list[np.ndarray]                    # each baseline's coefficients
 
 
 @dataclass
@@ -353,14 +367,17 @@ class Problem:
     # --- drift baseline --------------------------------------------------------------------------------------
     def drift_columns(self, u: int, log10_tau: float) -> list[tuple[int, np.ndarray]]:
         """Baseline u's columns on each of its runs: (run index, rows x columns)."""
-        key = (u, round(float(log10_tau), 6))
+        # computed at the rounded time constant it is kept under, so that a basis is a function of its key alone:
+        # computed at whichever value first rounded there, a fit's last digits would depend on the fits a process
+        # had made before it (and a pool's on which worker ran it)
+        tau = round(float(log10_tau), 6)
+        key = (u, tau)
         b = self._drift_basis.get(key)
         if b is None:
             if len(self._drift_basis) > 4 * len(self.baselines):
                 self._drift_basis.clear()
             span = self.baseline_span_s(u) if len(self.baselines[u]) > 1 else None
-            b = self._drift_basis[key] = [(k, self.engines[k].drift_basis(log10_tau, span))
-                                          for k in self.baselines[u]]
+            b = self._drift_basis[key] = [(k, self.engines[k].drift_basis(tau, span)) for k in self.baselines[u]]
         return b
 
     def _n_drift_columns(self, u: int) -> int:
@@ -439,9 +456,9 @@ class Problem:
         if "sensor_drift" not in lay.names:
             return out
         tau = float(x[lay.index[("shape", "sensor_drift", "warmup_log10_tau_s")]])
-        for u in range(len(self.baselines)):
+        for u, idx in enumerate(self._plan(lay).drift):
             runs = self.drift_columns(u, tau)
-            coef = np.array([x[lay.index[("drift", u, j)]] for j in range(runs[0][1].shape[1])])
+            coef = x[idx[:runs[0][1].shape[1]]]
             for k, cols in runs:
                 out[self.slices[k]] += cols @ coef
         return out
@@ -461,23 +478,33 @@ class Problem:
         return np.r_[z, self._prior(lay, x)]
 
     def _prior(self, lay: Layout, x: np.ndarray) -> np.ndarray:
-        out = []
-        for g in self.groups:
-            ab = np.array([x[lay.index[("gain", g, 0)]], x[lay.index[("gain", g, 1)]]])
-            out.extend(self.gain_whitening[g] @ ab)
-        for p, v in zip(lay.params, x, strict=True):
-            if p.kind == "shape":
-                out.append((v - FAMILIES[p.key[0]].shapes[p.key[1]].default) / p.scale)
-            elif p.kind == "plate":
-                out.append(v / tol.TOLERANCE["pzt_thickness"])
-        if "sensor_drift" in lay.names:
-            for u in range(len(self.baselines)):
-                n_s = self._smooth_rows(u)
-                if n_s:
-                    c = np.array([x[lay.index[("drift", u, j)]] for j in range(n_s + 2)])
-                    out.extend(np.diff(c, 2) / self._smooth_sd(u))
-            out.extend(x[i] / DRIFT_RIDGE_N for i, p in enumerate(lay.params) if p.kind == "drift")
-        return np.asarray(out, float)
+        plan = self._plan(lay)
+        out = [w @ np.array([x[i], x[j]]) for w, i, j in plan.gains]
+        out.append((x[plan.point] - plan.point_centre) / plan.point_scale)
+        out += [np.diff(x[idx], 2) / sd for idx, sd in plan.smooth]
+        out.append(x[plan.ridge] / DRIFT_RIDGE_N)
+        return np.concatenate(out)
+
+    def _plan(self, lay: Layout) -> _ResidualPlan:
+        """Where in a layout's parameter vector each prior row and drift baseline reads, found once per layout: the
+        residual is evaluated hundreds of times per fit, with hundreds of drift coefficients."""
+        if lay.plan is None:
+            gains = [(self.gain_whitening[g], lay.index[("gain", g, 0)], lay.index[("gain", g, 1)])
+                     for g in self.groups]
+            point = [i for i, q in enumerate(lay.params) if q.kind in ("shape", "plate")]
+            centre = [FAMILIES[q.key[0]].shapes[q.key[1]].default if q.kind == "shape" else 0.0
+                      for q in (lay.params[i] for i in point)]
+            scale = [q.scale if q.kind == "shape" else tol.TOLERANCE["pzt_thickness"]
+                     for q in (lay.params[i] for i in point)]
+            drift = "sensor_drift" in lay.names
+            columns = [np.array([lay.index[("drift", u, j)] for j in range(self._n_drift_columns(u))], int)
+                       for u in range(len(self.baselines))] if drift else []
+            smooth = [(columns[u][:n_s + 2], self._smooth_sd(u)) for u in range(len(columns))
+                      if (n_s := self._smooth_rows(u))]
+            ridge = [i for i, q in enumerate(lay.params) if q.kind == "drift"] if drift else []
+            lay.plan = _ResidualPlan(gains, np.array(point, int), np.array(centre, float), np.array(scale, float),
+                                     smooth, np.array(ridge, int), columns)
+        return lay.plan
 
     # --- solving -----------------------------------------------------------------------------------------------
     def solve(self, names: tuple[str, ...] | list[str], start: dict[tuple, float] | None = None,

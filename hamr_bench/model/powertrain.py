@@ -39,7 +39,7 @@ from hamr_bench.model.actuator import ActuatorParams, actuator_preset
 from hamr_bench.model.contact import PRESSING, friction_reading_ratio
 from hamr_bench.model.designs import DesignParams, design_preset
 from hamr_bench.model.effects import Effect, active, apply_voltage_series
-from hamr_bench.model.flexures import SerialChain
+from hamr_bench.model.flexures import FlexureStrip, SerialChain
 
 DEFAULT_VOLTAGE_LIMIT_V = 250.0
 _GRID_POINTS = 97
@@ -48,6 +48,20 @@ _ILLINOIS_STEPS = 40
 
 _CACHE_SIZE = 4096
 _NEUTRAL_CACHE: dict[tuple, float] = {}  # the undriven equilibrium of a powertrain, by what it depends on
+
+
+@lru_cache(maxsize=_CACHE_SIZE)
+def _serial_chain(k_eff_N_per_m: float, strip: FlexureStrip) -> SerialChain:
+    """The buckling chain for this stiffness and strip (read-only; a fit builds many powertrains that share it)."""
+    return SerialChain(k_eff_N_per_m, strip)
+
+
+@lru_cache(maxsize=_CACHE_SIZE)
+def _crank_grid(lo: float, hi: float) -> np.ndarray:
+    """The solver's bracketing grid over an operating range (read-only, shared by powertrains with that range)."""
+    grid = np.linspace(lo, hi, _GRID_POINTS)
+    grid.flags.writeable = False
+    return grid
 
 
 @lru_cache(maxsize=_CACHE_SIZE)
@@ -119,7 +133,8 @@ class Powertrain:
         self.k_eff_N_per_m = self.A * self.k_act_N_per_m
         self.kappa = np.asarray(design.kappa_N_m_per_rad, dtype=float)
         # The coupler's Kapton strips buckle past their Euler load: the serial chain softens (flexures.py).
-        self.serial_chain = SerialChain(self.k_eff_N_per_m, design.flexure_strip) if design.coupler_buckling else None
+        strip = design.flexure_strip if design.coupler_buckling else None
+        self.serial_chain = _serial_chain(self.k_eff_N_per_m, strip) if strip is not None else None
 
         g = self.geometry
         # Swing chain rotational stiffness at its own crank (undriven, unbiased copy of this transmission).
@@ -136,11 +151,10 @@ class Powertrain:
         self._psi_fab = float(tr.coupler_angle_rad(g, self.coupler_m, g.theta_fab_rad))
         self._has_flex = bool(np.any(self.kappa != 0) or self.k_swing_coupled != 0)
         self._theta_lo, self._theta_hi = self._operating_range()
-        self._grid = np.linspace(self._theta_lo, self._theta_hi, _GRID_POINTS)
+        self._grid = _crank_grid(self._theta_lo, self._theta_hi)
         # Fits build many powertrains that differ only in what the undriven equilibrium does not see (the
         # actuator's d31, a drive effect), so it is kept by everything it depends on.
-        neutral_key = (g, self.coupler_m, self.k_eff_N_per_m, design.flexure_strip if design.coupler_buckling
-                       else None, tuple(self.kappa.tolist()), self.k_swing_coupled)
+        neutral_key = (g, self.coupler_m, self.k_eff_N_per_m, strip, tuple(self.kappa.tolist()), self.k_swing_coupled)
         th_n = _NEUTRAL_CACHE.get(neutral_key)
         if th_n is None:
             th_n = self._solve(np.zeros(1), np.zeros(1), g.theta_fab_rad)[0]
