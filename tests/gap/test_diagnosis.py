@@ -152,3 +152,20 @@ def test_presets_far_off_get_the_wide_gain_bound_and_the_nominal_fit_reaches_the
     stiffness = [fit.value("gain", g, 1) for g in far.groups]
     assert all(-1.6 < b < -1.2 for b in stiffness), stiffness
     assert fit.chi2_rows < 3.0 * far.y.size       # the rows fit; at the narrow bound they could not
+
+
+def test_the_plate_loops_on_the_drive_changes_alone_are_the_loops_on_every_sample(null_lab):
+    """A play is rate-independent: evaluating the loops only where a plate's drive changes and spreading them back
+    gives every dense sample the loops of the full drive (the staircase repeats itself in most samples)."""
+    from analysis.gap import operators as op
+    from analysis.gap.engine import FULL_SCALE_V
+
+    e = Problem(load_gap_data(null_lab)).engines[0]
+    loops = e._plate_loops(0.12, 0.5, 0.3)
+    kept = 0
+    for k, v in enumerate((e.dense_vd, e.dense_vb - e.dense_vd)):
+        x = v / FULL_SCALE_V
+        every = FULL_SCALE_V * op.plate_hysteresis(x, op.plate_memory(x), op.plate_weights(0.12, 0.5, 0.3), 0.3)
+        np.testing.assert_allclose(loops[k], every, rtol=0, atol=1e-12 * FULL_SCALE_V)
+        kept += e._plate_drives()[k].above.size
+    assert kept < 0.8 * 2 * e.dense_t.size     # the repeats were left out
