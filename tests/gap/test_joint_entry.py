@@ -1,6 +1,6 @@
 """Two effects entered together when neither passes alone (analysis.gap.joint_entry): the rule's parts on stand-in
 fits and a stand-in judge whose held-out figures are set by hand, so each condition can be switched off alone.
-The five-effect campaign that needs it is in docs/gap.md (it is too slow to generate here)."""
+The five-effect campaign that needs it is regenerated and diagnosed in test_five_effect_campaign.py."""
 
 from __future__ import annotations
 
