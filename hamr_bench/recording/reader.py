@@ -330,7 +330,7 @@ class RecordingReader:
     def events(self) -> list[Event]:
         if Topic.EVENTS not in self._by_topic:
             return []
-        cls = self._message_class(Topic.EVENTS)
+        cls = self._message_class(Topic.EVENTS, ("time_s", "step", "kind", "message", "data"))
         out = []
         for payload in self._stream(Topic.EVENTS).payloads():
             msg = self._parse(cls, payload, Topic.EVENTS)
@@ -344,7 +344,7 @@ class RecordingReader:
         return out
 
     def traffic(self, topic: str) -> list[Traffic]:
-        cls = self._message_class(topic)
+        cls = self._message_class(topic, ("time_s", "direction", "data"))
         return [
             Traffic(m.time_s, m.direction, bytes(m.data))
             for m in (self._parse(cls, p, topic) for p in self._stream(topic).payloads())
@@ -360,7 +360,12 @@ class RecordingReader:
                 f"{schema_name}"
             )
         raw = schema_name == schemas.RAW_IMAGE_SCHEMA
-        cls = self._message_class(topic)
+        cls = self._message_class(topic, ("timestamp", "frame_id", "data") + (
+            ("width", "height", "encoding", "step") if raw else ("format",)))
+        stamp = cls.DESCRIPTOR.fields_by_name["timestamp"].message_type
+        if stamp is None or not {"seconds", "nanos"} <= set(stamp.fields_by_name):
+            raise RecordingError(f"{self.path}: topic {topic}: its schema {schema_name} has no timestamp seconds "
+                                 "and nanos")
         stream = self._streams.get(channel.id)
         if stream is None:
             return
@@ -427,12 +432,19 @@ class RecordingReader:
     def _stream(self, topic: str) -> ChannelStream:
         return self._streams.get(self._channel(topic).id) or ChannelStream()
 
-    def _message_class(self, topic: str) -> Any:
+    def _message_class(self, topic: str, fields: tuple[str, ...] = ()) -> Any:
+        """The topic's message class from the schema stored in the file, which must hold `fields` (the schema
+        record carries no checksum: a damaged or foreign one can decode with other field names)."""
         channel = self._channel(topic)
         schema = self._schemas.get(channel.schema_id)
         if schema is None or schema.encoding != "protobuf":
             raise RecordingError(f"{self.path}: topic {topic} has no protobuf schema")
-        return schemas.message_class(schema.name, schema.data)
+        cls = schemas.message_class(schema.name, schema.data)
+        missing = [f for f in fields if f not in cls.DESCRIPTOR.fields_by_name]
+        if missing:
+            raise RecordingError(f"{self.path}: topic {topic}: its schema {schema.name} has no field "
+                                 f"{', '.join(missing)}")
+        return cls
 
     def _parse(self, cls: Any, payload: bytes, topic: str) -> Any:
         try:

@@ -88,6 +88,22 @@ def test_info_and_recover_on_random_byte_flips(small_run, tmp_path, flips):
     assert outcome != "ok" or bytes(damaged) == data  # a flip is always noticed (CRCs everywhere)
 
 
+@pytest.mark.parametrize("schema, field", [(b"hamr_bench/Event.proto", b"message"),
+                                           (b"hamr_bench/Event.proto", b"kind")])
+def test_info_on_a_stored_schema_whose_field_name_was_flipped(small_run, tmp_path, schema, field):
+    """A schema record has no checksum: one flipped letter in a field's name still decodes, as a message without
+    that field. `info` says so in one line instead of an AttributeError's traceback."""
+    path, data = small_run
+    start = data.index(schema)
+    at = data.index(field, start)
+    damaged = bytearray(data)
+    damaged[at + len(field) - 1] ^= 0x01          # "message" -> "messagd": the same length, a valid name
+    target = tmp_path / "schema.mcap"
+    target.write_bytes(bytes(damaged))
+    code, err, _ = cli(["info", str(target)])
+    assert code == 2 and len(err) == 1 and "no field" in err[0], err
+
+
 # ------------------------------------------------------------------------------------ rig and protocol files
 RIG_LINES = [ln for ln in sim_rig_path().read_text().splitlines() if re.match(r"^[a-z_]+ *=", ln)]
 BAD_VALUES = ['"text"', "-1", "1e400", "[1, 2, 3]", "{ a = 1 }", "true", "0", '""', "nan"]
