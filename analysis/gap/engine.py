@@ -284,7 +284,6 @@ class RunEngine:
     def _plate_gains(self, d31: EffectValue, t_p: float) -> np.ndarray:
         """[G(V_drive), G(V_bias - V_drive)] on the dense grid (shape (2, n)): each plate's d31 relative to the
         nominal one at its voltage."""
-        vb, vd = self.dense_vb, self.dense_vd
         knee = 10.0 ** d31.shape("log10_knee_V_per_um", "field_dependent_d31")
         p = d31.shape("steepness", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
@@ -292,7 +291,7 @@ class RunEngine:
             # the plates' voltages are the run's, and a staircase holds few distinct ones (~1 in 12 samples): the
             # gain is computed on those (with their logs, once) and spread back
             self._plate_levels = []
-            for v in (vd, vb - vd):
+            for v in self._plates():
                 levels, where = np.unique(v, return_inverse=True)
                 self._plate_levels.append((levels, op.log_magnitude(levels), where))
         out = np.empty((2, self.dense_t.size))
@@ -314,7 +313,7 @@ class RunEngine:
         a staircase drive repeats itself in ~3 of 4 samples, which the loops are then not evaluated on."""
         if self._plate_drive is None:
             self._plate_drive = []
-            for v in (self.dense_vd, self.dense_vb - self.dense_vd):
+            for v in self._plates():
                 x = v / FULL_SCALE_V
                 changes = np.r_[True, x[1:] != x[:-1]]
                 xs = x[changes]
