@@ -60,30 +60,35 @@ class FitPool:
                                              initializer=one_blas_thread)
 
     def add_each(self, base: Fit, names: Sequence[str], max_nfev: int,
-                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
-        return self._add_each(base, names, max_nfev, starts or {}, judged=False)
+                 starts: Mapping[str, Sequence[Start | None]] | None = None, looks: Sequence[str] = (),
+                 look_nfev: int = 0) -> dict[str, Fit]:
+        return self._add_each(base, names, max_nfev, starts or {}, False, looks, look_nfev)
 
     def add_each_judged(self, base: Fit, names: Sequence[str], max_nfev: int,
-                        starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
-        """`add_each`, each fit returned with its held-out z (a selection step judges every fit it makes)."""
-        return self._add_each(base, names, max_nfev, starts or {}, judged=True)
+                        starts: Mapping[str, Sequence[Start | None]] | None = None, looks: Sequence[str] = (),
+                        look_nfev: int = 0) -> dict[str, Fit]:
+        """`add_each`, each full fit returned with its held-out z (a selection step judges every fit it makes; a
+        look is judged only if it passes, as a fit of its own)."""
+        return self._add_each(base, names, max_nfev, starts or {}, True, looks, look_nfev)
 
     def _add_each(self, base: Fit, names: Sequence[str], max_nfev: int,
-                  starts: Mapping[str, Sequence[Start | None]], judged: bool) -> dict[str, Fit]:
-        tasks = [(n, s0) for n in names for s0 in starts.get(n, [None])]
+                  starts: Mapping[str, Sequence[Start | None]], judged: bool, looks: Sequence[str],
+                  look_nfev: int) -> dict[str, Fit]:
+        tasks = [(n, s0, max_nfev, judged) for n in names for s0 in starts.get(n, [None])]
+        tasks += [(n, None, look_nfev, False) for n in looks]
         if self._pool is None or len(tasks) < 2:
             with threadpool_limits(limits=1):
-                return add_each_here(self.p)(base, names, max_nfev, starts)
+                return add_each_here(self.p)(base, names, max_nfev, starts, looks, look_nfev)
         # longest first (by what each candidate's last fit took; a new one counts as longest): the step waits for
         # its slowest fit, so that one should not start last
         tasks.sort(key=lambda t: -self._took.get(t[0], math.inf))
         out: dict[str, Fit] = {}
-        done = self._pool.map(_add_one, [(base, n, s0, max_nfev, judged) for n, s0 in tasks])
-        for (n, _), (fit, took) in zip(tasks, done, strict=True):
+        done = self._pool.map(_add_one, [(base, n, s0, nfev, j) for n, s0, nfev, j in tasks])
+        for (n, *_), (fit, took) in zip(tasks, done, strict=True):
             self._took[n] = took
             if n not in out or fit.objective < out[n].objective:
                 out[n] = fit
-        return {n: out[n] for n in names}
+        return {n: out[n] for n in (*names, *looks)}
 
     def add_onto(self, tasks: Sequence[tuple[Fit, str, Start]], max_nfev: int) -> list[Fit]:
         """`screening.AddOnto`: each task's name added to its own base, side by side, each fit with its held-out

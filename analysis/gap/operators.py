@@ -10,9 +10,9 @@ import functools
 import math
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy.interpolate import BSpline
 from scipy.optimize import brentq
-from scipy.signal import fftconvolve
 
 # ------------------------------------------------------------------ hysteresis: plays on each plate
 PLATE_PLAYS = 16   # play half-widths r_i = (i - 1/2) / (2 N) of full scale, i = 1..N (the unipolar range)
@@ -189,8 +189,18 @@ def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:
     dy = np.r_[0.0, np.diff(y)]
     if dy.size < 2:
         return np.zeros_like(y)
-    kernel = creep_kernel(np.arange(dy.size) * dt_s, exponent)
-    return fftconvolve(dy, kernel)[:dy.size]
+    size = sp_fft.next_fast_len(2 * dy.size - 1, real=True)
+    spectrum = _kernel_spectrum(dy.size, dt_s, exponent, size)
+    return sp_fft.irfft(sp_fft.rfft(dy, size) * spectrum, size)[:dy.size]
+
+
+@functools.lru_cache(maxsize=128)
+def _kernel_spectrum(n: int, dt_s: float, exponent: float, size: int) -> np.ndarray:
+    """The creep kernel's spectrum on an n-sample grid, zero-padded to `size`: a fit's Jacobian changes the drive
+    (every other parameter's column) far more often than the exponent, and each run's kernel is the same then."""
+    out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent), size)
+    out.flags.writeable = False      # cached: shared by every caller
+    return out
 
 
 # ------------------------------------------------------------------ field-dependent d31

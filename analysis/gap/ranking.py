@@ -1,17 +1,20 @@
 """Stage 3, rank: forward selection by held-out gap. From the nominal fit, each promising candidate is added in
 turn to the effects named so far and the whole refitted (in batches of MAX_TRIED by screening improvement, the next
-batch only when none of the last passes); of those whose in-sample improvement passes the likelihood-ratio test and
-whose held-out reduction's bootstrap interval is above 0, the one that lowers the held-out gap most is named.
-Candidates whose addition is as good on both counts are named with it as one ambiguous set. A rival of a step's
-lead (it passed there too and explained at least half as much in-sample) is fitted at the next step from its own
-fit as well as from the lead's, and the better fit kept: two effects that explain much the same misfit can leave
-their joint fit in whichever basin it started from. When none passes alone, two may pass together
-(`joint_entry`): both are named, as two bars of the waterfall. The selection stops when nothing passes, when the
-held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The waterfall is the held-out gap
-after each addition."""
+batch only when none of the last passes; at the first step after the nominal fit, each candidate the screening
+turned down is looked at again by a short fit beside the first batch, and fitted outright if it shows there and
+either nothing passed or it improves more than what did); of those whose in-sample improvement passes the
+likelihood-ratio test and whose held-out reduction's bootstrap interval is above 0, the one that lowers the
+held-out gap most is named. Candidates whose addition is as good on both counts are named with it as one
+ambiguous set. A rival of a step's lead (it passed there too and explained at least half as much in-sample) is
+fitted at the next step from its own fit as well as from the lead's, and the better fit kept: two effects that
+explain much the same misfit can leave their joint fit in whichever basin it started from. When none passes
+alone, two may pass together (`joint_entry`): both are named, as two bars of the waterfall. The selection stops
+when nothing passes, when the held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The
+waterfall is the held-out gap after each addition."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -31,6 +34,7 @@ MAX_TRIED = 4            # promising candidates tried at each step (by screening
 TIE_RATIO = 1.1          # held-out RMS within 10 % counts as a tie
 STEP_ALPHA = 0.01
 RIVAL_SHARE = 0.5        # a candidate explaining this share of the lead's in-sample improvement is its rival
+LOOK_NFEV = 6            # evaluations of a turned-down candidate's second look (a short fit)
 
 
 @dataclass
@@ -58,34 +62,20 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     rejected: list[StepCandidate] = []
     spent: set[str] = set()   # named, alone or in an ambiguous set
     rivals: dict[str, Fit] = {}   # the last step's rivals of its lead: their fits there, by candidate
+    rescreened = False    # the turned-down candidates' short fits: once, at the first step after the nominal
     while gap and pool and len(current.names) < MAX_EFFECTS:
         if current is not nominal and judge.heldout(current).ci95[0] <= 1.0:
             # at the noise floor; not tested on the nominal fit: the gap tests opened the diagnosis, and the
             # paired held-out reduction each candidate must pass is the stronger test there
             break
-        again = _looked_again(p, current, screened, set(pool) | spent, grid_objectives) \
-            if current is not nominal else []
-        tried: dict[str, Fit] = {}
-        judged: dict[str, tuple[HeldOut, tuple[float, float]]] = {}
-        # the promising candidates in batches of MAX_TRIED (by screening improvement) until one passes: the largest
-        # in-sample improvements can all fail held out (a spring or a d31 curve fitting what a fabrication shift
-        # causes), and the candidates behind them must still be tried
-        for first in range(0, max(len(pool), 1), MAX_TRIED):
-            names = pool[first:first + MAX_TRIED] + (again if first == 0 else [])
-            screened_fits = screen_fits if current is nominal and screen_fits else {}
-            reuse = {n: f for n in names if (f := screened_fits.get(n)) is not None and f.extra.get("converged")}
-            # an unconverged screening fit (the same problem) goes on from where it stopped; a rival of the last
-            # step's lead (it passed there and explained at least RIVAL_SHARE of what the lead did in-sample: much
-            # the same misfit) is also fitted from its fit there, the lead carried over: started only from the lead's
-            # fit, their joint fit can stay in the lead's basin with the rival at a sliver
-            starts: dict[str, list[Start | None]] = {n: [screened_fits[n].values()] for n in names
-                                                      if n in screened_fits and n not in reuse}
-            starts |= {n: [None, carried_start(current, rivals[n], n)] for n in names if n in rivals}
-            fitted = (add_each or add_each_here(p))(current, [n for n in names if n not in reuse], 40, starts)
-            tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
-            rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
-            if passing:
-                break
+        extra, looks = _second_look(p, current, screened, set(pool) | spent, grid_objectives) \
+            if current is not nominal else ([], [])
+        if rescreened:
+            looks = []
+        rescreened = current is not nominal
+        screened_fits = screen_fits if current is nominal and screen_fits else {}
+        tried, rows, passing, scale2 = _fit_step(p, current, pool, extra, looks, judge, add_each or add_each_here(p),
+                                                 screened_fits, rivals, len(screened))
         if not passing:
             bar = partial(_step_bar, p, scale2, len(pool))
             joint = joint_entry(p, current, rows, tried, judge, add_onto or add_onto_here(p), bar, STEP_ALPHA,
@@ -118,6 +108,47 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     return Selection(steps, fits, rejected)
 
 
+def _fit_step(p: Problem, current: Fit, pool: list[str], extra: list[str], looks: list[str], judge: Judge,
+              add_each: AddEach, screened_fits: dict[str, Fit], rivals: dict[str, Fit], n_screened: int
+              ) -> tuple[dict[str, Fit], list[StepCandidate], list[StepCandidate], float]:
+    """One step's fits and how they fare (`_judged`): the promising candidates in batches of MAX_TRIED (by
+    screening improvement) until one passes, since the largest in-sample improvements can all fail held out (a
+    spring or a d31 curve fitting what a fabrication shift causes) and the candidates behind them must still be
+    tried; `extra` fitted outright and `looks` by a short fit beside the first batch. A look that shows is fitted
+    outright at this step: next if nothing passed, and beside what passed only if its short fit already improves
+    more than they do."""
+    tried: dict[str, Fit] = {}
+    judged: dict[str, tuple[HeldOut, tuple[float, float]]] = {}
+    looked: dict[str, Fit] = {}   # looks that showed: their short fits, to start from
+    queue = list(pool)
+    first = True
+    while True:
+        names = queue[:MAX_TRIED] + (extra if first else [])
+        queue = queue[MAX_TRIED:]
+        reuse = {n: f for n in names if (f := screened_fits.get(n)) is not None and f.extra.get("converged")}
+        # an unconverged screening fit (the same problem) goes on from where it stopped; a rival of the last
+        # step's lead (it passed there and explained at least RIVAL_SHARE of what the lead did in-sample: much
+        # the same misfit) is also fitted from its fit there, the lead carried over: started only from the lead's
+        # fit, their joint fit can stay in the lead's basin with the rival at a sliver
+        starts: dict[str, list[Start | None]] = {n: [screened_fits[n].values()] for n in names
+                                                  if n in screened_fits and n not in reuse}
+        starts |= {n: [None, carried_start(current, rivals[n], n)] for n in names if n in rivals}
+        starts |= {n: [looked[n].values()] for n in names if n in looked}
+        step_looks = looks if first else []
+        fitted = add_each(current, [n for n in names if n not in reuse], 40, starts, step_looks, LOOK_NFEV)
+        tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
+        found = _passed_looks(p, current, {n: fitted[n] for n in step_looks}, n_screened)
+        looked |= found
+        rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
+        first = False
+        if found:
+            lead_improvement = max((c.improvement for c in passing), default=-math.inf)
+            contenders = [n for n, f in found.items() if improvement(current, f, scale2) > lead_improvement]
+            queue = contenders + ([] if passing else queue)
+        if not queue or (passing and not found):
+            return tried, rows, passing, scale2
+
+
 def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge, n_pool: int,
             judged: dict[str, tuple[HeldOut, tuple[float, float]]]) -> tuple[list[StepCandidate],
                                                                                list[StepCandidate], float]:
@@ -142,20 +173,33 @@ def _step_bar(p: Problem, scale2: float, n_pool: int, name: str) -> float:
     return threshold(p, name, scale2, n_pool, STEP_ALPHA)
 
 
-def _looked_again(p: Problem, current: Fit, screened: list[Screened], exclude: set[str],
-                  grid_objectives: GridObjectives | None = None) -> list[str]:
-    """Candidates the screening against the nominal fit turned down whose best strength on the coarse grid lowers
-    the current fit's objective by more than the screening threshold: a large effect named first can hide a smaller
-    one from a fit started at the nominal model (its fit stopped short of the nominal objective itself). And every
-    turned-down baseline family, which has no grid to look with."""
+def _second_look(p: Problem, current: Fit, screened: list[Screened], exclude: set[str],
+                 grid_objectives: GridObjectives | None = None) -> tuple[list[str], list[str]]:
+    """The candidates the screening against the nominal fit turned down, looked at again on the current fit: a
+    large effect named first can hide a smaller one from a fit started at the nominal model (its fit stopped short
+    of the nominal objective itself). Returns (those to fit at this step outright, those to look at by a short fit
+    beside the step's first batch, `_passed_looks`).
+
+    A fabrication shift is looked at on its coarse grid, the specimens' gains moved by what it changes
+    (`screening.compensated`): that is all a shift needs to follow the fit; it is fitted outright where a grid
+    strength lowers the objective by more than the screening threshold. A baseline family has no grid and is
+    fitted outright (a large drive effect inflates the over-dispersion its screening threshold is scaled by, and
+    hides a drift under it). A drive, contact, design or stage effect gets a short fit: held at the current
+    fit's lags and gains, a creep hidden under a d31 curve raised the objective at every grid strength, and a few
+    evaluations that let them follow lowered it by twenty times the bar."""
     scale2 = overdispersion(p, current, 0)
     left = [s.name for s in screened if not (s.promising or s.name in exclude)]
-    # a baseline's many coefficients have no coarse grid: it is refitted outright (a large drive effect inflates
-    # the over-dispersion its screening threshold is scaled by, and hides a drift under it)
-    baselines = [n for n in left if FAMILIES[n].kind == "baseline"]
-    names = [n for n in left if n not in baselines]
-    objective = (grid_objectives or grid_objectives_here(p))(current, names)
-    return [n for n in names if current.objective - objective[n] > threshold(p, n, scale2, len(screened))] + baselines
+    shifts = [n for n in left if FAMILIES[n].kind == "params"]
+    objective = (grid_objectives or grid_objectives_here(p))(current, shifts)
+    outright = [n for n in shifts if current.objective - objective[n] > threshold(p, n, scale2, len(screened))]
+    outright += [n for n in left if FAMILIES[n].kind == "baseline"]
+    return outright, [n for n in left if n not in shifts and FAMILIES[n].kind != "baseline"]
+
+
+def _passed_looks(p: Problem, current: Fit, fits: dict[str, Fit], n_screened: int) -> dict[str, Fit]:
+    """The short fits whose improvement on the current fit passes the screening threshold."""
+    scale2 = overdispersion(p, current, 0)
+    return {n: f for n, f in fits.items() if improvement(current, f, scale2) > threshold(p, n, scale2, n_screened)}
 
 
 def _lead(rows: list[StepCandidate], tried: dict[str, Fit], judge: Judge) -> StepCandidate:

@@ -143,9 +143,11 @@ Start = Mapping[tuple, float]
 class AddEach(Protocol):
     """For each name, `base`'s effects plus that one, refitted from each of the name's `starts` (None: `base` and
     the name's best strength on the coarse grid; the default for a name not in `starts`), the fit with the lowest
-    objective kept."""
+    objective kept. Each of `looks` (names not among `names`) is fitted in the same batch from its grid start for
+    only `look_nfev` evaluations: a second look, run beside the full fits rather than before them."""
     def __call__(self, base: Fit, names: Sequence[str], max_nfev: int,
-                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]: ...
+                 starts: Mapping[str, Sequence[Start | None]] | None = None, looks: Sequence[str] = (),
+                 look_nfev: int = 0) -> dict[str, Fit]: ...
 
 
 GridObjectives = Callable[[Fit, Sequence[str]], dict[str, float]]
@@ -170,9 +172,11 @@ def grid_objectives_here(p: Problem) -> GridObjectives:
 def add_each_here(p: Problem) -> AddEach:
     """Candidate fits one after another in this process (`fitpool.FitPool.add_each` runs them side by side)."""
     def add_each(base: Fit, names: Sequence[str], max_nfev: int,
-                 starts: Mapping[str, Sequence[Start | None]] | None = None) -> dict[str, Fit]:
-        return {n: min((fit_added(p, base, n, s0, max_nfev) for s0 in (starts or {}).get(n, [None])),
-                       key=lambda f: f.objective) for n in names}
+                 starts: Mapping[str, Sequence[Start | None]] | None = None, looks: Sequence[str] = (),
+                 look_nfev: int = 0) -> dict[str, Fit]:
+        out = {n: min((fit_added(p, base, n, s0, max_nfev) for s0 in (starts or {}).get(n, [None])),
+                      key=lambda f: f.objective) for n in names}
+        return out | {n: fit_added(p, base, n, None, look_nfev) for n in looks}
     return add_each
 
 

@@ -1,0 +1,67 @@
+"""A smaller effect hidden from the screening by a large one (analysis.gap.ranking, the second look by a short fit).
+Data: one self-check trial (the simulated bench's own effect forms, through the trace export and the importer, as
+`selfcheck` runs it), a d31 that falls by half across the field with creep of 0.033 per decade and a drift. Against
+the nominal model the d31 curve's misfit swamps the creep: its screening fit stays at nothing and it is turned
+down. Once the d31 curve is named, the creep is plain, but only to a fit that lets the lags and gains follow it: at
+every strength of the coarse grid, everything else held, it raised the objective. Before the short-fit look the
+diagnosis named the d31 curve alone."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from analysis.gap.diagnose import diagnose
+from analysis.gap.features import load_gap_data
+from analysis.gap.screening import grid_best
+from analysis.gap.selfcheck import TRIAL_OPTIONS, TRIAL_SPECIMENS, _draw_pool
+from analysis.importer import import_trace
+from sim_devices.scenarios import draw_scenario
+from sim_devices.trace_export import export_actuator_traces, record_specimens
+
+TRIAL_SEED = 204800003     # a multi-effect trial of the self-check's seed 2048
+CANDIDATES = ("hysteresis", "creep", "field_dependent_d31", "sensor_drift")
+
+
+@pytest.fixture(scope="module")
+def hidden_creep():
+    sc = draw_scenario(TRIAL_SEED, null_fraction=0.15, decoy_fraction=0.1, n_specimens=TRIAL_SPECIMENS,
+                       fixtures=("actuator",), pool=_draw_pool())
+    truth = {e.library_name: e.library_strength for e in sc.effects if not e.decoy}
+    assert set(truth) == {"field_dependent_d31", "creep", "sensor_drift"}, truth
+    with tempfile.TemporaryDirectory(prefix="hamr-second-look-") as tmp:
+        root = Path(tmp)
+        runs = record_specimens(sc, root / "runs", set_options=TRIAL_OPTIONS, seed=TRIAL_SEED)
+        paths = []
+        for csv_path in export_actuator_traces(sc, root / "csv", recordings=runs):
+            out = root / (csv_path.stem + ".mcap")
+            import_trace(csv_path, out, "actuator", layers=sc.layers)
+            paths.append(out)
+        return truth, diagnose(load_gap_data(paths), candidates=CANDIDATES, seed=TRIAL_SEED, jobs=2)
+
+
+def test_the_screening_turns_the_creep_down(hidden_creep):
+    _, r = hidden_creep
+    creep = next(s for s in r.screening if s.name == "creep")
+    assert not creep.promising
+    assert r.waterfall[1].added == "field_dependent_d31"
+
+
+def test_held_at_the_d31_fit_no_grid_strength_of_the_creep_lowers_the_objective(hidden_creep):
+    _, r = hidden_creep
+    p, after_d31 = r.fits["problem"], r.fits["steps"][1]
+    objective, _ = grid_best(p, after_d31, "creep")
+    assert objective > after_d31.objective
+
+
+def test_the_short_fit_look_names_the_creep_after_the_d31_curve(hidden_creep):
+    truth, r = hidden_creep
+    named = {e.name: e for e in r.named}
+    assert [s.added for s in r.waterfall[1:3]] == ["field_dependent_d31", "creep"]
+    assert named["creep"].verdict == "attributed"
+    lo, hi = named["creep"].strength_ci95
+    # named, and of the right size: the creep's interval runs low or high by a few tenths of its width on the
+    # bench's Prony form (docs/gap.md, coverage), so the check is on the order of magnitude, not the interval
+    assert lo > 0 and 0.5 * truth["creep"] < named["creep"].strength < 2.0 * truth["creep"], (named["creep"], truth)
