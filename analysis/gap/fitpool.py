@@ -84,8 +84,9 @@ class FitPool:
         tasks.sort(key=lambda t: -self._took.get(t[0], math.inf))
         out: dict[str, Fit] = {}
         done = self._pool.map(_add_one, [(base, n, s0, nfev, j) for n, s0, nfev, j in tasks])
-        for (n, *_), (fit, took) in zip(tasks, done, strict=True):
-            self._took[n] = took
+        for (n, _, nfev, _), (fit, took) in zip(tasks, done, strict=True):
+            if nfev == max_nfev:     # a short look's time says little about the candidate's full fit
+                self._took[n] = took
             if n not in out or fit.objective < out[n].objective:
                 out[n] = fit
         return {n: out[n] for n in (*names, *looks)}
