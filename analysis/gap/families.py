@@ -11,9 +11,9 @@ pairs side by side):
 | field_dependent_d31 | d31 gain 1 + a E^p / (E^p + c^p), knee c, steepness p, either sign | d31(250 V)/d31(100 V) - 1 |
 | base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
 | sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
-| width_loss | constant kerf per cut edge on the tapered plate | fraction of the mean width lost |
+| width_loss | constant kerf per cut edge on the tapered plate (one way) | fraction of the mean width lost |
 | pzt_thickness, pzt_modulus, cf_thickness | the parameter scaled | fractional change |
-| grounding_lengthening | active length scaled, the rigid extension kept | fractional change |
+| grounding_lengthening | active length scaled, the rigid extension kept (one way) | fractional change |
 | sensor_drift | per run (per specimen on one clock) a penalised cubic spline + warm-up t / (t + tau) | N/sqrt(s) |
 | bias_error | coupler lengthening offset (leg) | m |
 | stage_backlash | play on the stage-target sequence | m (full width) |
@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from analysis.gap.tolerances import BAND_SIGMAS
 from hamr_bench.errors import ConfigError
 
 
@@ -52,6 +53,14 @@ class Family:
     scale: float = 1.0             # typical strength (finite-difference and solver scale)
 
 
+def _one_sided(tolerance: float, hi: float) -> tuple[float, float]:
+    """Bounds of a mechanism that acts one way only: a laser kerf only takes width away, and imperfect grounding
+    only moves the clamp line outward (a longer active length). The other side reaches just to the tolerance band,
+    where the specimens' scatter already is, so that an opposite shift beyond tolerance (a wider plate, a shorter
+    actuator) is left to the candidates that can make it, not read as this mechanism run backwards."""
+    return (-BAND_SIGMAS * tolerance, hi)
+
+
 FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("hysteresis", "largest rise/fall gap of the net drive / span, full drive cycle (250 V)", (0.0, 0.3),
            "plays on each plate's unipolar range (threshold density ~ r^gamma), tips on the first rise", "drive",
@@ -70,13 +79,13 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("sensor_compliance", "m/N (secant at 50 mN)", (0.0, 2e-3),
            "series spring in the force sensor, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
            {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=5e-5),
-    Family("width_loss", "fraction of the nominal mean width lost", (-0.2, 0.5),
+    Family("width_loss", "fraction of the nominal mean width lost", _one_sided(0.02, 0.5),
            "constant kerf per cut edge on the tapered plate", "params", tolerance=0.02, scale=0.1),
     Family("pzt_thickness", "fractional change of the PZT plate thickness", (-0.3, 0.6),
            "PZT plate thickness scaled", "params", tolerance=0.04, scale=0.1),
     Family("pzt_modulus", "fractional change of the PZT modulus", (-0.6, 0.6),
            "effective PZT modulus scaled", "params", tolerance=0.05, scale=0.1),
-    Family("grounding_lengthening", "fractional change of the active length", (-0.3, 0.5),
+    Family("grounding_lengthening", "fractional change of the active length", _one_sided(0.02, 0.5),
            "active length scaled, the rigid extension kept (clamp line moved)", "params", tolerance=0.02,
            scale=0.05),
     Family("cf_thickness", "fractional change of the carbon-fibre layer thickness", (-0.7, 1.0),
