@@ -69,26 +69,40 @@ def _draw_pool() -> tuple[str, ...]:
     return tuple(n for n in LIBRARY_EFFECTS if n not in EXCLUDED_FROM_DRAW)
 
 
+def draw_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
+               specimens: int = TRIAL_SPECIMENS) -> Any:
+    """The trial's scenario: what the simulated bench will hold (effects, strengths, specimens)."""
+    from sim_devices.scenarios import draw_scenario
+
+    return draw_scenario(seed, null_fraction=null_fraction, decoy_fraction=decoy_fraction, n_specimens=specimens,
+                         fixtures=("actuator",), pool=_draw_pool())
+
+
+def trial_recordings(sc: Any, seed: int, root: Path) -> list[Path]:
+    """The trial as another lab's data: each specimen recorded on the simulated bench, exported as trace CSVs and
+    imported as a user would (`hamr-bench import trace`), into MCAP files under `root`."""
+    from analysis.importer import import_trace
+    from sim_devices.trace_export import export_actuator_traces, record_specimens
+
+    runs = record_specimens(sc, root / "runs", set_options=TRIAL_OPTIONS, seed=seed)
+    paths = []
+    for csv_path in export_actuator_traces(sc, root / "csv", recordings=runs):
+        out = root / "imported" / (csv_path.stem + ".mcap")
+        out.parent.mkdir(exist_ok=True)
+        import_trace(csv_path, out, "actuator", layers=sc.layers)
+        paths.append(out)
+    return paths
+
+
 def run_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
               specimens: int = TRIAL_SPECIMENS) -> Trial:
     from analysis.gap.diagnose import diagnose
     from analysis.gap.features import load_gap_data
-    from analysis.importer import import_trace
-    from sim_devices.scenarios import draw_scenario
-    from sim_devices.trace_export import export_actuator_traces, record_specimens
 
-    sc = draw_scenario(seed, null_fraction=null_fraction, decoy_fraction=decoy_fraction, n_specimens=specimens,
-                       fixtures=("actuator",), pool=_draw_pool())
+    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens)
     with tempfile.TemporaryDirectory(prefix="hamr-selfcheck-") as tmp:
-        root = Path(tmp)
         t0 = time.perf_counter()
-        runs = record_specimens(sc, root / "runs", set_options=TRIAL_OPTIONS, seed=seed)
-        paths = []
-        for csv_path in export_actuator_traces(sc, root / "csv", recordings=runs):
-            out = root / "imported" / (csv_path.stem + ".mcap")
-            out.parent.mkdir(exist_ok=True)
-            import_trace(csv_path, out, "actuator", layers=sc.layers)
-            paths.append(out)
+        paths = trial_recordings(sc, seed, Path(tmp))
         t1 = time.perf_counter()
         result = diagnose(load_gap_data(paths), seed=seed)   # the recordings alone
         t2 = time.perf_counter()
@@ -186,10 +200,8 @@ def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 
     from analysis.gap.families import FABRICATION
     from hamr_bench.model import actuator as act
     from hamr_bench.model import actuator_preset
-    from sim_devices.scenarios import draw_scenario
 
-    sc = draw_scenario(seed, null_fraction=null_fraction, decoy_fraction=decoy_fraction, n_specimens=specimens,
-                       fixtures=("actuator",), pool=_draw_pool())
+    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens)
     a = actuator_preset(sc.layers, sc.params_set)
     w = tol.whitening(a)
     n = len(sc.specimens)

@@ -16,10 +16,7 @@ import pytest
 from analysis.gap.diagnose import diagnose
 from analysis.gap.features import load_gap_data
 from analysis.gap.screening import grid_best
-from analysis.gap.selfcheck import TRIAL_OPTIONS, TRIAL_SPECIMENS, _draw_pool
-from analysis.importer import import_trace
-from sim_devices.scenarios import draw_scenario
-from sim_devices.trace_export import export_actuator_traces, record_specimens
+from analysis.gap.selfcheck import draw_trial, trial_recordings
 
 TRIAL_SEED = 204800003     # a multi-effect trial of the self-check's seed 2048
 CANDIDATES = ("hysteresis", "creep", "field_dependent_d31", "sensor_drift")
@@ -27,18 +24,11 @@ CANDIDATES = ("hysteresis", "creep", "field_dependent_d31", "sensor_drift")
 
 @pytest.fixture(scope="module")
 def hidden_creep():
-    sc = draw_scenario(TRIAL_SEED, null_fraction=0.15, decoy_fraction=0.1, n_specimens=TRIAL_SPECIMENS,
-                       fixtures=("actuator",), pool=_draw_pool())
+    sc = draw_trial(TRIAL_SEED)
     truth = {e.library_name: e.library_strength for e in sc.effects if not e.decoy}
     assert set(truth) == {"field_dependent_d31", "creep", "sensor_drift"}, truth
     with tempfile.TemporaryDirectory(prefix="hamr-second-look-") as tmp:
-        root = Path(tmp)
-        runs = record_specimens(sc, root / "runs", set_options=TRIAL_OPTIONS, seed=TRIAL_SEED)
-        paths = []
-        for csv_path in export_actuator_traces(sc, root / "csv", recordings=runs):
-            out = root / (csv_path.stem + ".mcap")
-            import_trace(csv_path, out, "actuator", layers=sc.layers)
-            paths.append(out)
+        paths = trial_recordings(sc, TRIAL_SEED, Path(tmp))
         return truth, diagnose(load_gap_data(paths), candidates=CANDIDATES, seed=TRIAL_SEED, jobs=2)
 
 
