@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from analysis.gap.tolerances import BAND_SIGMAS
+from analysis.gap.tolerances import BAND_SIGMAS, TOLERANCE
 from hamr_bench.errors import ConfigError
 
 
@@ -79,17 +79,17 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("sensor_compliance", "m/N (secant at 50 mN)", (0.0, 2e-3),
            "series spring in the force sensor, x = C F_ref (F/F_ref)^beta, pull side rho x", "contact",
            {"exponent": Shape(1.0, 0.3, 1.5, 0.4), "pull_ratio": Shape(1.0, 0.2, 5.0, 1.5)}, scale=5e-5),
-    Family("width_loss", "fraction of the nominal mean width lost", _one_sided(0.02, 0.5),
-           "constant kerf per cut edge on the tapered plate", "params", tolerance=0.02, scale=0.1),
+    Family("width_loss", "fraction of the nominal mean width lost", _one_sided(TOLERANCE["width"], 0.5),
+           "constant kerf per cut edge on the tapered plate", "params", tolerance=TOLERANCE["width"], scale=0.1),
     Family("pzt_thickness", "fractional change of the PZT plate thickness", (-0.3, 0.6),
-           "PZT plate thickness scaled", "params", tolerance=0.04, scale=0.1),
+           "PZT plate thickness scaled", "params", tolerance=TOLERANCE["pzt_thickness"], scale=0.1),
     Family("pzt_modulus", "fractional change of the PZT modulus", (-0.6, 0.6),
-           "effective PZT modulus scaled", "params", tolerance=0.05, scale=0.1),
-    Family("grounding_lengthening", "fractional change of the active length", _one_sided(0.02, 0.5),
-           "active length scaled, the rigid extension kept (clamp line moved)", "params", tolerance=0.02,
-           scale=0.05),
+           "effective PZT modulus scaled", "params", tolerance=TOLERANCE["pzt_modulus"], scale=0.1),
+    Family("grounding_lengthening", "fractional change of the active length", _one_sided(TOLERANCE["length"], 0.5),
+           "active length scaled, the rigid extension kept (clamp line moved)", "params",
+           tolerance=TOLERANCE["length"], scale=0.05),
     Family("cf_thickness", "fractional change of the carbon-fibre layer thickness", (-0.7, 1.0),
-           "carbon-fibre layer thickness scaled", "params", tolerance=0.10, scale=0.2),
+           "carbon-fibre layer thickness scaled", "params", tolerance=TOLERANCE["cf_thickness"], scale=0.2),
     Family("sensor_drift", "N/sqrt(s) (baseline wander rate)", (0.0, math.inf),
            "force baseline per run (per specimen on a shared clock): penalised cubic spline + warm-up t/(t + tau)",
            "baseline",

@@ -28,11 +28,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from analysis.gap.diagnose import DETECTION_SIGMAS
+
+if TYPE_CHECKING:
+    from sim_devices.scenarios import Scenario
 
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
@@ -70,7 +73,7 @@ def _draw_pool() -> tuple[str, ...]:
 
 
 def draw_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-               specimens: int = TRIAL_SPECIMENS) -> Any:
+               specimens: int = TRIAL_SPECIMENS) -> Scenario:
     """The trial's scenario: what the simulated bench will hold (effects, strengths, specimens)."""
     from sim_devices.scenarios import draw_scenario
 
@@ -78,7 +81,7 @@ def draw_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0
                          fixtures=("actuator",), pool=_draw_pool())
 
 
-def trial_recordings(sc: Any, seed: int, root: Path) -> list[Path]:
+def trial_recordings(sc: Scenario, seed: int, root: Path) -> list[Path]:
     """The trial as another lab's data: each specimen recorded on the simulated bench, exported as trace CSVs and
     imported as a user would (`hamr-bench import trace`), into MCAP files under `root`."""
     from analysis.importer import import_trace
