@@ -1,11 +1,14 @@
-"""`hamr-bench selfcheck [--trials N] [--seed S] [--jobs J] --json`: the gap diagnosis checked blind on the
-simulated bench (hidden effect of random type and realistic strength, null cases, decoys; analysis/gap/selfcheck.py)."""
+"""`hamr-bench selfcheck [--trials N] [--seed S] [--jobs J] [--specimens K] --json`: the gap diagnosis checked
+blind on the simulated bench (hidden effect of random type and realistic strength, null cases, decoys;
+analysis/gap/selfcheck.py)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 from pathlib import Path
+
+TRIAL_SPECIMENS = 3   # as analysis.gap.selfcheck.TRIAL_SPECIMENS (not imported here: that module is heavy)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -17,6 +20,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="run the trials on a Dask cluster (tcp://HOST:8786; needs the 'dask' extra)")
     parser.add_argument("--null-fraction", type=float, default=0.15, help="share of no-effect trials")
     parser.add_argument("--decoy-fraction", type=float, default=0.1, help="share of decoy trials")
+    parser.add_argument("--specimens", type=int, default=TRIAL_SPECIMENS,
+                        help=f"specimens built per trial, each with its own fabrication scatter (default "
+                             f"{TRIAL_SPECIMENS}; a common shift's detection limit falls as 1 / sqrt(specimens))")
     parser.add_argument("--raw", type=Path, metavar="FILE",
                         help="append each trial's result to FILE as it ends (JSON lines; a long run stopped part way "
                              "keeps its trials: score them with analysis.gap.selfcheck.score_raw)")
@@ -29,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError(f"--trials: expected at least 1, got {args.trials}")
+    if args.specimens < 1:
+        raise ConfigError(f"--specimens: expected at least 1, got {args.specimens}")
     if not (args.null_fraction >= 0 and args.decoy_fraction >= 0 and args.null_fraction + args.decoy_fraction <= 1):
         raise ConfigError("--null-fraction and --decoy-fraction: expected shares in [0, 1] summing to at most 1")
     if args.raw is not None and not args.raw.parent.is_dir():
@@ -37,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = selfcheck(trials=args.trials, seed=args.seed, jobs=max(1, args.jobs), null_fraction=args.null_fraction,
                     decoy_fraction=args.decoy_fraction, progress=not args.json, scheduler=args.scheduler,
-                    raw_path=str(args.raw) if args.raw else None)
+                    raw_path=str(args.raw) if args.raw else None, specimens=args.specimens)
     if args.json:
         print(json.dumps(out, indent=1, default=float))
     else:

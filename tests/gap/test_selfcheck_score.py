@@ -96,3 +96,31 @@ def test_a_pair_entered_together_is_recorded_once_and_counted():
     trials = [_trial("multi", ["hysteresis"]), _trial("multi", ["creep"])]
     trials[0].joint = joint_pairs(waterfall)
     assert score(trials)["trials_with_a_joint_entry"] == 1
+
+
+def test_specimens_as_built_sit_where_the_drawn_strength_says_once_their_scatter_is_taken_away():
+    import dataclasses
+
+    from analysis.gap.selfcheck import built_sigmas, draw_trial, gain_sigmas
+    from hamr_bench.model import actuator_preset
+
+    seed = next(s for s in range(400) if draw_trial(s).kind == "single"
+                and draw_trial(s).effects[0].name == "pzt_thickness")
+    sc = draw_trial(seed)
+    preset = actuator_preset(sc.layers, sc.params_set)
+    exact = tuple(dataclasses.replace(spec, actuator={k: getattr(preset, k) for k in spec.actuator})
+                  for spec in sc.specimens)
+    # every specimen built exactly to the presets: only the shift is left, as the drawn strength has it (the
+    # bench's own form of the thicker plate against the diagnosis's `tolerances.scaled`)
+    assert built_sigmas(dataclasses.replace(sc, specimens=exact)) == pytest.approx(
+        gain_sigmas(seed)["pzt_thickness"], rel=1e-9)
+    assert built_sigmas(dataclasses.replace(sc, specimens=exact, effects=())) == 0.0
+    # with their scatter the specimens sit elsewhere: the mean of three specimens' scatter is not zero
+    assert built_sigmas(sc) != pytest.approx(gain_sigmas(seed)["pzt_thickness"], rel=1e-3)
+
+
+def test_the_command_builds_as_many_specimens_as_the_check_does_unless_told():
+    from analysis.commands import selfcheck as command
+    from analysis.gap import selfcheck
+
+    assert command.TRIAL_SPECIMENS == selfcheck.TRIAL_SPECIMENS
