@@ -1,16 +1,16 @@
-"""Stage 3, rank: forward selection by held-out gap. From the nominal fit, each promising candidate is added in
-turn to the effects named so far and the whole refitted (in batches of MAX_TRIED by screening improvement, the next
-batch only when none of the last passes; at the first step after the nominal fit, each candidate the screening
-turned down is looked at again by a short fit beside the first batch, and fitted outright if it shows there and
-either nothing passed or it improves more than what did); of those whose in-sample improvement passes the
-likelihood-ratio test and whose held-out reduction's bootstrap interval is above 0, the one that lowers the
-held-out gap most is named. Candidates whose addition is as good on both counts are named with it as one
-ambiguous set. A rival of a step's lead (it passed there too and explained at least half as much in-sample) is
-fitted at the next step from its own fit as well as from the lead's, and the better fit kept: two effects that
-explain much the same misfit can leave their joint fit in whichever basin it started from. When none passes
-alone, two may pass together (`joint_entry`): both are named, as two bars of the waterfall. The selection stops
-when nothing passes, when the held-out gap after a named effect is at the noise floor, or after MAX_EFFECTS. The
-waterfall is the held-out gap after each addition."""
+"""Stage 3, rank: forward selection by held-out gap. From the nominal fit, each promising candidate is added in turn to
+the effects named so far and the whole refitted (in batches of MAX_TRIED by screening improvement, widened so as not
+to split candidates the screening could not tell apart, the next batch only when none of the last passes; at the
+first step after the nominal fit, each candidate the screening turned down is looked at again by a short fit beside
+the first batch, and fitted outright if it shows there and either nothing passed or it improves more than what did);
+of those whose in-sample improvement passes the likelihood-ratio test and whose held-out reduction's bootstrap
+interval is above 0, the one that lowers the held-out gap most is named. Candidates whose addition is as good on
+both counts are named with it as one ambiguous set. A rival of a step's lead (it passed there too and explained at
+least half as much in-sample) is fitted at the next step from its own fit as well as from the lead's, and the better
+fit kept: two effects that explain much the same misfit can leave their joint fit in whichever basin it started
+from. When none passes alone, two may pass together (`joint_entry`): both are named, as two bars of the waterfall.
+The selection stops when nothing passes, when the held-out gap after a named effect is at the noise floor, or after
+MAX_EFFECTS. The waterfall is the held-out gap after each addition."""
 
 from __future__ import annotations
 
@@ -75,7 +75,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
         rescreened = current is not nominal
         screened_fits = screen_fits if current is nominal and screen_fits else {}
         tried, rows, passing, scale2 = _fit_step(p, current, pool, extra, looks, judge, add_each or add_each_here(p),
-                                                 screened_fits, rivals, len(screened))
+                                                 screened_fits, rivals, screened)
         if not passing:
             bar = partial(_step_bar, p, scale2, len(pool))
             joint = joint_entry(p, current, rows, tried, judge, add_onto or add_onto_here(p), bar, STEP_ALPHA,
@@ -108,13 +108,29 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     return Selection(steps, fits, rejected)
 
 
+def _next_batch(queue: list[str], screened: list[Screened], bar: float) -> tuple[list[str], list[str]]:
+    """(the next batch, the rest): the first MAX_TRIED of the queue (by screening improvement), and after them
+    each whose screening improvement is as good as the last of those within `bar` (the in-sample bar of a tie,
+    `_tie_bar`). A batch boundary must not split candidates the screening could not tell apart: one left behind
+    is never tried once its batch-mates pass, and the ambiguous set named then lacks it (a sensor spring whose
+    improvement equalled the base spring's, fifth in the queue)."""
+    n = min(MAX_TRIED, len(queue))
+    if n == 0:
+        return [], []
+    gain = {s.name: s.improvement for s in screened}
+    floor = gain.get(queue[n - 1], math.inf) - bar
+    while n < len(queue) and gain.get(queue[n], -math.inf) > floor:
+        n += 1
+    return queue[:n], queue[n:]
+
+
 def _fit_step(p: Problem, current: Fit, pool: list[str], extra: list[str], looks: list[str], judge: Judge,
-              add_each: AddEach, screened_fits: dict[str, Fit], rivals: dict[str, Fit], n_screened: int
+              add_each: AddEach, screened_fits: dict[str, Fit], rivals: dict[str, Fit], screened: list[Screened]
               ) -> tuple[dict[str, Fit], list[StepCandidate], list[StepCandidate], float]:
-    """One step's fits and how they fare (`_judged`): the promising candidates in batches of MAX_TRIED (by
-    screening improvement) until one passes, since the largest in-sample improvements can all fail held out (a
-    spring or a d31 curve fitting what a fabrication shift causes) and the candidates behind them must still be
-    tried; `extra` fitted outright and `looks` by a short fit beside the first batch. A look that shows is fitted
+    """One step's fits and how they fare (`_judged`): the promising candidates in batches (`_next_batch`) until
+    one passes, since the largest in-sample improvements can all fail held out (a spring or a d31 curve fitting
+    what a fabrication shift causes) and the candidates behind them must still be tried; `extra` fitted outright
+    and `looks` by a short fit beside the first batch. A look that shows is fitted
     outright at this step: next if nothing passed, and beside what passed only if its short fit already improves
     more than they do."""
     tried: dict[str, Fit] = {}
@@ -123,8 +139,8 @@ def _fit_step(p: Problem, current: Fit, pool: list[str], extra: list[str], looks
     queue = list(pool)
     first = True
     while True:
-        names = queue[:MAX_TRIED] + (extra if first else [])
-        queue = queue[MAX_TRIED:]
+        batch, queue = _next_batch(queue, screened, _tie_bar(overdispersion(p, current, 0)))
+        names = batch + (extra if first else [])
         reuse = {n: f for n in names if (f := screened_fits.get(n)) is not None and f.extra.get("converged")}
         # an unconverged screening fit (the same problem) goes on from where it stopped; a rival of the last
         # step's lead (it passed there and explained at least RIVAL_SHARE of what the lead did in-sample: much
@@ -137,7 +153,7 @@ def _fit_step(p: Problem, current: Fit, pool: list[str], extra: list[str], looks
         step_looks = looks if first else []
         fitted = add_each(current, [n for n in names if n not in reuse], 40, starts, step_looks, LOOK_NFEV)
         tried.update({n: reuse[n] if n in reuse else fitted[n] for n in names})
-        found = _passed_looks(p, current, {n: fitted[n] for n in step_looks}, n_screened)
+        found = _passed_looks(p, current, {n: fitted[n] for n in step_looks}, len(screened))
         looked |= found
         rows, passing, scale2 = _judged(p, current, tried, judge, len(pool), judged)
         first = False
@@ -219,8 +235,14 @@ def _tie(c: StepCandidate, lead: StepCandidate, tried: dict[str, Fit], judge: Ju
         return False
     lo, _ = judge.difference_ci(tried[c.name], tried[lead.name])
     close_heldout = lo <= 0 or c.heldout.rms < TIE_RATIO * lead.heldout.rms
-    in_sample = abs(tried[c.name].objective - tried[lead.name].objective) / scale2
-    return bool(close_heldout and in_sample < stats.chi2.ppf(0.99, 1))
+    in_sample = abs(tried[c.name].objective - tried[lead.name].objective)
+    return bool(close_heldout and in_sample < _tie_bar(scale2))
+
+
+def _tie_bar(scale2: float) -> float:
+    """How far apart two fits' in-sample objectives may be and still tie: the 1 % point of chi^2(1) x
+    over-dispersion."""
+    return float(stats.chi2.ppf(0.99, 1)) * scale2
 
 
 def strength_estimate(p: Problem, fit: Fit, name: str, judge: Judge) -> tuple[float, tuple[float, float]]:
