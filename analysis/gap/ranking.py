@@ -138,8 +138,9 @@ def _fit_step(p: Problem, current: Fit, pool: list[str], extra: list[str], looks
     looked: dict[str, Fit] = {}   # looks that showed: their short fits, to start from
     queue = list(pool)
     first = True
+    batch_bar = _tie_bar(overdispersion(p, current, 0))
     while True:
-        batch, queue = _next_batch(queue, screened, _tie_bar(overdispersion(p, current, 0)))
+        batch, queue = _next_batch(queue, screened, batch_bar)
         names = batch + (extra if first else [])
         reuse = {n: f for n in names if (f := screened_fits.get(n)) is not None and f.extra.get("converged")}
         # an unconverged screening fit (the same problem) goes on from where it stopped; a rival of the last

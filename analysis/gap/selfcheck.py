@@ -245,8 +245,8 @@ def built_sigmas(sc: Scenario) -> float:
     for spec in sc.specimens:
         a = act.with_changes(preset, **spec.actuator)
         spring_loss = 0.0
-        for e in sc.effects:
-            if e.name in MODEL_HOOKS and e.name != "flexure_softening":
+        for e in sc.effects:    # a design-side hook (a flexure decoy) leaves the plate as it is
+            if e.name in MODEL_HOOKS:
                 a = MODEL_HOOKS[e.name](strength=e.strength).actuator_params(a)
         for e in sc.effects:    # a series spring after the plate: its share of the tip's deflection is lost
             if e.name == "sensor_compliance":
