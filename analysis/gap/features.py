@@ -15,7 +15,8 @@ the ramp)
 
 and an undriven step (the leg's static test, the actuator's stiffness sweep) into one `hold` window. A row is
 the mean of the sensor over its window, averaged over the step's cycles; its standard error comes from the
-cycle-to-cycle scatter pooled over the run's steps of that phase (pure error). Camera rows are relative to the
+cycle-to-cycle scatter pooled over the run's steps of that phase (pure error), then moderated toward the other
+runs' of that window kind (`moderation`). Camera rows are relative to the
 same cycle's low_late window (the camera has no absolute zero).
 
 Steps, their cycles and the timelines come from the recording contract's one step parser
@@ -43,6 +44,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from analysis.gap.history import history_notes, share_specimen_history
+from analysis.gap.moderation import squeeze
 from analysis.sessions import session_key
 from hamr_bench.errors import ConfigError, RecordingError
 from hamr_bench.recording.contract import EventKind, Topic
@@ -72,6 +74,8 @@ class Row:
     ref_times_s: np.ndarray | None = None   # camera rows: the same cycles' low-dwell sample times (subtracted)
     ref_cycle: np.ndarray | None = None
     se: float = math.nan
+    pure_var: float = math.nan     # the run's cycle-to-cycle variance for this phase (pooled over its steps) ...
+    pure_dof: int = 0              # ... on this many degrees of freedom, before moderation (`moderation`)
     # Standard error of the MODEL's value for this row that comes from an inferred drive (0 for a commanded one):
     # the step's V_bias and the ramps' timing are measured, with the monitor's noise; propagated with the data's
     # own sensitivities (value / V_bias for the level, the data's slope on a ramp for the timing). Independent of
@@ -373,15 +377,40 @@ def load_run(path: Path | str, index: int) -> RunTrace:
 
 def _pool_standard_errors(run: RunTrace) -> None:
     """Standard error per row from the pure error pooled over the run's rows of the same phase and quantity."""
-    groups: dict[tuple[str, str], list[Row]] = {}
-    for r in run.rows:
-        groups.setdefault((r.quantity, r.phase), []).append(r)
-    for rows in groups.values():
+    for rows in _phase_groups(run).values():
         ss = sum(float(np.sum((r._cycle_values - r._cycle_values.mean()) ** 2)) for r in rows)  # type: ignore
         dof = sum(r._cycle_values.size - 1 for r in rows)  # type: ignore[attr-defined]
         var = ss / dof if dof > 0 else math.nan
         for r in rows:
+            r.pure_var, r.pure_dof = var, dof
             r.se = math.sqrt(var / r.n) if np.isfinite(var) else math.nan
+
+
+def _phase_groups(run: RunTrace) -> dict[tuple[str, str], list[Row]]:
+    groups: dict[tuple[str, str], list[Row]] = {}
+    for r in run.rows:
+        groups.setdefault((r.quantity, r.phase), []).append(r)
+    return groups
+
+
+def moderate_standard_errors(runs: list[RunTrace]) -> dict[tuple[str, str, str], float]:
+    """Each run's pure error of a window kind (fixture, quantity, phase) moderated toward the other runs'
+    (`moderation.squeeze`, with a trend in log |V_bias|); the rows' `se` follow. Returns each kind's prior dof."""
+    units: dict[tuple[str, str, str], list[list[Row]]] = {}
+    for run in runs:
+        for (quantity, phase), rows in _phase_groups(run).items():
+            units.setdefault((run.fixture, quantity, phase), []).append(rows)
+    prior: dict[tuple[str, str, str], float] = {}
+    for kind, groups in units.items():
+        var = np.array([g[0].pure_var for g in groups])
+        dof = np.array([g[0].pure_dof for g in groups], float)
+        volts = np.array([np.mean([math.log(max(abs(r.voltage_V), 1.0)) for r in g]) for g in groups])
+        sq = squeeze(var, dof, volts)
+        prior[kind] = sq.prior_dof
+        for g, v in zip(groups, sq.variance, strict=True):
+            for r in g:
+                r.se = math.sqrt(v / r.n) if np.isfinite(v) else r.se
+    return prior
 
 
 def _load_runs_task(path: Path) -> list[RunTrace]:
@@ -410,6 +439,7 @@ def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: 
         for row in run.rows:
             row.run = k
     share_specimen_history(runs)
+    moderate_standard_errors(runs)
     rows = [r for run in runs for r in run.rows]
     if not rows:
         raise RecordingError(f"{files[0]}: no driven or static steps to compare with the model")
