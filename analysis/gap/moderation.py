@@ -50,20 +50,18 @@ def squeeze(variance: np.ndarray, dof: np.ndarray, covariate: np.ndarray | None 
         return Squeezed(s2.copy(), 0.0, False)
     # log s^2 is biased by digamma(d/2) - log(d/2) and spreads by trigamma(d/2) from sampling alone
     e = np.log(s2[ok]) - special.digamma(d[ok] / 2) + np.log(d[ok] / 2)
-    x = None if covariate is None else np.asarray(covariate, float)
-    trend = (x is not None and ok.sum() >= MIN_TREND_UNITS and np.unique(np.round(x[ok], 6)).size >= 3)
-    design = (np.column_stack([np.ones(ok.sum()), x[ok]]) if trend and x is not None
-              else np.ones((ok.sum(), 1)))
-    coef, *_ = np.linalg.lstsq(design, e, rcond=None)
-    resid = e - design @ coef
+    x = np.zeros(s2.size) if covariate is None else np.asarray(covariate, float)
+    trend = bool(ok.sum() >= MIN_TREND_UNITS and np.unique(np.round(x[ok], 6)).size >= 3)
+    design = np.column_stack([np.ones(s2.size), x]) if trend else np.ones((s2.size, 1))
+    coef, *_ = np.linalg.lstsq(design[ok], e, rcond=None)
+    resid = e - design[ok] @ coef
     excess = float(resid @ resid) / (ok.sum() - design.shape[1]) - float(np.mean(special.polygamma(1, d[ok] / 2)))
     # below ~1e-12 the spread beyond sampling is nil to double precision (and past trigamma's bracket)
     d0 = 2.0 * _trigamma_inverse(excess) if excess > 1e-12 else math.inf
-    full = (np.column_stack([np.ones(s2.size), x]) if trend and x is not None else np.ones((s2.size, 1)))
-    log_level = full @ coef
+    log_level = design @ coef
     if math.isfinite(d0):
         level = np.exp(log_level + special.digamma(d0 / 2) - math.log(d0 / 2))
         post = np.where(ok, (d0 * level + d * np.where(ok, s2, 0.0)) / (d0 + d), level)
     else:
         post = np.exp(log_level)
-    return Squeezed(post, d0, bool(trend))
+    return Squeezed(post, d0, trend)
