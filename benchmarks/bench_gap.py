@@ -3,6 +3,7 @@
 reduction). Usage:
 
     python3 -m benchmarks.bench_gap campaign DIR            # time `diagnose` on a campaign's recordings
+    python3 -m benchmarks.bench_gap evaluations DIR         # ms per model evaluation, per candidate
     python3 -m benchmarks.bench_gap selfcheck [N] [SEED] [JOBS]
 """
 
@@ -31,6 +32,40 @@ def bench_campaign(directory: str) -> None:
         print(f"  {e.name}: {e.verdict}, strength {e.strength:.4g} {list(e.strength_ci95)}")
 
 
+def bench_evaluations(directory: str, n: int = 60) -> None:
+    """What one evaluation of the residual costs on a campaign (ms), the nominal model and each applicable
+    candidate alone at a typical strength, over n parameter vectors that each move a fifth of the parameters
+    (so the engines' caches miss as in a fit's first evaluations at a new point, not as in a Jacobian's columns).
+    One process, one BLAS thread."""
+    import numpy as np
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+    from analysis.gap.diagnose import applicable
+    from analysis.gap.families import CANDIDATES, FAMILIES
+    from analysis.gap.features import load_gap_data
+    from analysis.gap.problem import Problem
+
+    p = Problem(load_gap_data([directory]))
+    start = p.initial_nuisances()
+    print(f"campaign {directory}: {len(p.engines)} runs, {p.y.size} rows")
+    with threadpool_limits(limits=1):
+        for names in [()] + [(c,) for c in applicable(p, list(CANDIDATES))]:
+            lay = p.layout(names)
+            x0 = lay.vector(start)
+            for c in names:
+                if ("strength", c) in lay.index:
+                    x0[lay.index[("strength", c)]] = FAMILIES[c].scale
+            rng = np.random.default_rng(0)
+            scale = lay.scales()
+            lo, hi = lay.bounds()
+            xs = [np.clip(x0 + rng.normal(0.0, 0.05, x0.size) * scale * (rng.random(x0.size) < 0.2), lo, hi)
+                  for _ in range(n)]
+            t0 = time.perf_counter()
+            for x in xs:
+                p.residual(lay, x)
+            print(f"  {names[0] if names else 'nominal'}: {(time.perf_counter() - t0) / n * 1e3:.1f} ms per evaluation")
+
+
 def bench_selfcheck(n: int, seed: int, jobs: int) -> None:
     from analysis.gap.selfcheck import selfcheck
 
@@ -48,6 +83,8 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if args and args[0] == "campaign":
         bench_campaign(args[1])
+    elif args and args[0] == "evaluations":
+        bench_evaluations(args[1])
     else:
         n = int(args[1]) if len(args) > 1 else 100
         seed = int(args[2]) if len(args) > 2 else 1

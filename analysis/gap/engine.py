@@ -7,7 +7,7 @@ The drive path, on a uniform grid of DENSE_DT_S:
     plate voltages V_drive, V_bias - V_drive -> each plate's hysteresis -> x its d31(E) gain -> net drive -> creep
 
 read at the sensor's sample times (minus the sensor chain's lag) as the drive was played: the command's
-staircase itself (`_Staircase`, averaged over the amplifier's settling, or over one step ahead for an inferred
+staircase itself (`timebase.Staircase`, averaged over the amplifier's settling, or over one step ahead for an inferred
 drive), plus what the drive effects change on the grid. Then the quasi-static model: the bare actuator's
 closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at 0 for a
 sensor that reads only push) or the powertrain (leg). The force baseline (drift) is added linearly by `Problem`.
@@ -27,6 +27,7 @@ import numpy as np
 from analysis.gap import operators as op
 from analysis.gap import tolerances as tol
 from analysis.gap.families import FAMILIES
+from analysis.gap.timebase import GridPlaces, Staircase, WindowMean, zoh
 from hamr_bench.errors import HamrBenchError
 from hamr_bench.model import ActuatorParams, DesignParams, Powertrain, actuator_preset, design_preset
 from hamr_bench.model import actuator as act
@@ -75,13 +76,6 @@ class RunNuisance:
     log_plate_thickness: float = 0.0   # the specimen's plates against the nominal: the field a voltage makes
 
 
-def _zoh(t_cmd: np.ndarray, v_cmd: np.ndarray, t: np.ndarray, before: float = 0.0) -> np.ndarray:
-    if t_cmd.size == 0:
-        return np.full(t.shape, before)
-    i = np.searchsorted(t_cmd, t, "right") - 1
-    return np.where(i >= 0, v_cmd[np.clip(i, 0, None)], before)
-
-
 def _keep(cache: dict, key: Any, value: Any) -> None:
     """Add to a small least-recently-used cache of AT_CACHE entries (`_recall` marks a hit as used)."""
     if len(cache) >= AT_CACHE:
@@ -108,30 +102,6 @@ class _PlateDrive:
     below: np.ndarray
     memory: np.ndarray
     sample_of: np.ndarray
-
-
-class _Staircase:
-    """A command held between its samples (a DAQ's zero-order hold), through its running integral: the mean over
-    any interval is exact wherever the interval falls relative to the steps."""
-
-    def __init__(self, t_cmd: np.ndarray, v_cmd: np.ndarray, before: float = 0.0) -> None:
-        self.t, self.v, self.before = t_cmd, v_cmd, before
-        self._at = np.r_[0.0, np.cumsum(v_cmd[:-1] * np.diff(t_cmd))] if t_cmd.size else np.zeros(0)
-
-    def integral(self, t: np.ndarray) -> np.ndarray:
-        """The integral from the first sample to `t` (the value before it: `before`)."""
-        if self.t.size == 0:
-            return self.before * t
-        i = np.searchsorted(self.t, t, "right") - 1
-        k = np.maximum(i, 0)
-        out = self._at[k] + self.v[k] * (t - self.t[k])
-        before = i < 0
-        if before.any():   # rare (a lag reaching before the first command): not computed for every sample
-            out[before] = self.before * (t[before] - self.t[0])
-        return out
-
-    def mean(self, start: np.ndarray, width: float) -> np.ndarray:
-        return (self.integral(start + width) - self.integral(start)) / width
 
 
 def base_params(run: Any, fit_params: dict | None = None) -> tuple[ActuatorParams, DesignParams | None]:
@@ -223,8 +193,8 @@ class RunEngine:
         # The drive as played: a staircase at the command's own sample times. The dense grid (for the memory of
         # hysteresis and creep) holds each cell's mean; a sample's drive is read from the staircase itself (a
         # staircase step falls anywhere in a cell, and on a fast ramp a cell is several noise widths of force).
-        self._bias = _Staircase(*run.bias_cmd)
-        self._drive = _Staircase(*run.drive_cmd)
+        self._bias = Staircase(*run.bias_cmd)
+        self._drive = Staircase(*run.drive_cmd)
         self.dense_vb = self._bias.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
         self.dense_vd = self._drive.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
         self._dense_net = 2.0 * self.dense_vd - self.dense_vb     # bottom plate - top plate, no effect
@@ -241,6 +211,10 @@ class RunEngine:
         self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
+        self._played_net: WindowMean | None = None
+        self._places: dict[tuple, GridPlaces] = {}
+        self._stage_at: dict[tuple, np.ndarray] = {}
+        self._used_levels: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._held: dict[tuple, HeldFoot] = {}
         self._spline_rows: dict[tuple, np.ndarray] = {}  # drift spline columns' row means, per knots and span
 
@@ -342,7 +316,11 @@ class RunEngine:
         if y is None:
             y = self._played_at(times, te, lags)
             if any(FAMILIES[n].kind == "drive" for n in effects):
-                y = y + np.interp(te, self.dense_t, self.effective_drive(effects, t_p) - self._dense_net)
+                places = _recall(self._places, (times, lags))
+                if places is None:
+                    places = GridPlaces.of(te, float(self.dense_t[0]), DENSE_DT_S, self.dense_t.size)
+                    _keep(self._places, (times, lags), places)
+                y = y + places.interp(self.effective_drive(effects, t_p) - self._dense_net)
             _keep(self._at, key, y)
         return y
 
@@ -350,8 +328,10 @@ class RunEngine:
         """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times."""
         y = _recall(self._played, (times, lags))
         if y is None:
-            start, w = te - self._settle_s, self._settle_s + self._ahead_s
-            y = 2.0 * self._drive.mean(start, w) - self._bias.mean(start, w)
+            if self._played_net is None:
+                self._played_net = WindowMean([(2.0, self._drive), (-1.0, self._bias)],
+                                               self._settle_s + self._ahead_s)
+            y = self._played_net(te - self._settle_s)
             _keep(self._played, (times, lags), y)
         return y
 
@@ -407,17 +387,43 @@ class RunEngine:
 
     def surface_at(self, t: np.ndarray, backlash_m: float) -> np.ndarray:
         """Stage carriage position relative to the run's contact position (play on the target sequence)."""
+        return self.surface_levels(backlash_m)[self.stage_index(t)]
+
+    def stage_index(self, t: np.ndarray) -> np.ndarray:
+        """Per time, which of `surface_levels` the carriage holds (0: before the first command)."""
+        ts, _ = self.run.stage_cmd
+        return np.searchsorted(ts, t, "right") if ts.size else np.zeros(t.shape, np.intp)
+
+    def _stage_index_at(self, times_key: tuple, t: np.ndarray) -> np.ndarray:
+        """`stage_index` of a row set's (lagged) force sample times, kept per (times, lags)."""
+        index = _recall(self._stage_at, times_key)
+        if index is None:
+            index = self.stage_index(t)
+            _keep(self._stage_at, times_key, index)
+        return index
+
+    def _held_levels(self, times_key: tuple, t: np.ndarray, backlash_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """The carriage levels the force samples at `t` see (only those: a level the foot never meets, such as the
+        start of the contact search, can lie beyond the leg's reach) and, per sample, which of them."""
+        used = _recall(self._used_levels, times_key)
+        if used is None:
+            used = np.unique(self._stage_index_at(times_key, t), return_inverse=True)
+            _keep(self._used_levels, times_key, used)
+        return self.surface_levels(backlash_m)[used[0]], used[1]
+
+    def surface_levels(self, backlash_m: float) -> np.ndarray:
+        """The carriage's positions relative to the run's contact position: before the first command, then after
+        each (the stage holds each target until the next: a step's force samples see one of a few levels)."""
         ts, xs = self.run.stage_cmd
         if ts.size == 0:
-            return np.zeros(t.shape)
+            return np.zeros(1)
         x = xs
         if backlash_m != 0:
             # the contact search's last move backed off (away), so the carriage sits half the play in
             x = op.play(np.r_[xs[0] + backlash_m, xs], backlash_m / 2.0)[1:]
-        pos = _zoh(ts, x, t, before=x[0])
         tc = self.run.t_contact_s
-        ref = float(_zoh(ts, x, np.array([tc]), before=x[0])[0]) if tc is not None else float(x[0])
-        return pos - ref
+        ref = float(zoh(ts, x, np.array([tc]), before=x[0])[0]) if tc is not None else float(x[0])
+        return np.r_[x[0], x] - ref
 
     def _springs(self, effects: Effects) -> list[tuple[float, float, float]]:
         """(C, beta, rho) of the active series springs: the sensor's strength is its compliance, the base's the
@@ -446,7 +452,8 @@ class RunEngine:
             d = ~is_force
             out[d] = c / k * y[d]
             if is_force.any():
-                f0 = c * y[is_force] + k * (self.surface_at(te[is_force], b) + nuis.shift_m)
+                surface = self.surface_levels(b)[self._stage_index_at((times, lags), te[is_force])]
+                f0 = c * y[is_force] + k * (surface + nuis.shift_m)
                 f = op.spring_solve_many(f0, k, self._springs(effects))
                 out[is_force] = f if self.reads_pull else np.maximum(f, 0.0)
             return out
@@ -473,17 +480,19 @@ class RunEngine:
                 np.zeros(FREE_HEIGHT_NODES), FREE_HEIGHT_GRID_V))
             out[m] = -np.interp(half[m], FREE_HEIGHT_GRID_V, table)
         if is_force.any():
-            h = self.surface_at(te[is_force], backlash_m) + nuis.shift_m
+            levels, index = self._held_levels(times_key, te[is_force], backlash_m)
+            levels = levels + nuis.shift_m
             u = p.free_actuator_deflection_m(zero[is_force], half[is_force])
             # the heights change with the lags, the shift and the backlash only: a Jacobian's columns for the gains'
-            # stroke and every drive effect reuse the linkage's trigonometry at them
+            # stroke and every drive effect reuse the linkage's trigonometry at them; it is solved at the stage's few
+            # levels and spread to the samples
             where = (p.held_foot_key, times_key, backlash_m, nuis.shift_m)
 
             def held(offset_m: float) -> HeldFoot:
                 key = where + (offset_m,)
                 pose = _recall(self._held, key)
                 if pose is None:
-                    pose = p.hold_foot(h + offset_m)
+                    pose = p.hold_foot(levels + offset_m).take(index)
                     _keep(self._held, key, pose)
                 return pose
 

@@ -91,8 +91,9 @@ def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray
         for c in cols:
             for j in prior_rows.get(c, []):
                 train[n + j] = False
-        jt = fit.jac[np.ix_(train, keep_cols)]
-        step, *_ = np.linalg.lstsq(jt, -fit.residual[train], rcond=1e-10)
+        scale = lay.scales()[keep_cols]
+        step, *_ = np.linalg.lstsq(fit.jac[np.ix_(train, keep_cols)] * scale, -fit.residual[train], rcond=1e-10)
+        step *= scale
         x0 = fit.x.copy()
         x0[cols] = 0.0
         z_pop = (p.y - p.model(lay, x0)) / p.sigma
@@ -113,9 +114,13 @@ def heldout_errors(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, 
     it, so even the right model's raw held-out z would scatter wider than the noise (~1.4-1.5 x on the
     self-check's effect-free trials); in these units its RMS is ~1, the noise floor the held-out gap is read
     against. Directions the training rows leave undetermined are dropped from the step and from the spread
-    alike (the pseudo-inverse's cut)."""
+    alike (the pseudo-inverse's cut, on the Jacobian's columns in the parameters' scaled units: in their own
+    units a direction's singular value says as much about its unit as about the data, and a near-undetermined
+    lag kept by an unscaled cut took steps of 10^6 of its scale, which FD noise in its column turned into
+    held-out errors of 10^3 noise units)."""
     n = fit.layout.n_rows
-    r, j = fit.residual, fit.jac
+    scale = fit.layout.scales()
+    r, j = fit.residual, fit.jac * scale       # columns in the parameters' scaled units (`Layout.scales`)
     out = np.zeros(n)
     spreads = np.ones(n)
     steps = []
@@ -128,7 +133,7 @@ def heldout_errors(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, 
         jh = j[:n][held]
         spreads[held] = np.sqrt(1.0 + np.sum((jh @ proj) ** 2, axis=1))
         out[held] = r[:n][held] + jh @ step
-        steps.append(step)
+        steps.append(step * scale)
     return out, spreads, steps
 
 

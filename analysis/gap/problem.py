@@ -82,6 +82,13 @@ class Layout:
     def values(self, x: np.ndarray) -> dict[tuple, float]:
         return {(p.kind,) + p.key: float(v) for p, v in zip(self.params, x, strict=True)}
 
+    def scales(self) -> np.ndarray:
+        """Each parameter's natural size (the solver's x_scale). A pseudo-inverse of the Jacobian is taken on its
+        columns times these: in the parameters' own units a contact shift's column (per metre) is ~10^10 times
+        a gain's, and a relative cut of singular values would keep or drop directions by the units they are
+        written in."""
+        return np.array([p.scale for p in self.params])
+
 
 @dataclass(frozen=True)
 class _ResidualPlan:
@@ -137,12 +144,15 @@ class Fit:
         """(J^T J)^+ (unit noise), from the singular values of J itself. Forming J^T J squares J's condition
         number, and a direction only the tolerance prior pins (a fabrication shift against the specimens' gains,
         whose data columns are 10^4 times larger) then fell below the pseudo-inverse's cut: its variance came
-        out 0 and a shift's interval 0.1 % wide. Directions below 1e-10 of the largest singular value are
-        dropped, as in the held-out steps."""
+        out 0 and a shift's interval 0.1 % wide. Taken on the columns in the parameters' scaled units
+        (`Layout.scales`); directions below 1e-10 of the largest singular value there are dropped, as in the
+        held-out steps."""
         if "covariance" not in self.extra:
-            _, sv, vt = np.linalg.svd(self.jac, full_matrices=False)
+            scale = self.layout.scales()
+            _, sv, vt = np.linalg.svd(self.jac * scale, full_matrices=False)
             keep = sv > COVARIANCE_RCOND * (sv[0] if sv.size else 0.0)
-            self.extra["covariance"] = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+            cov = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+            self.extra["covariance"] = cov * scale[:, None] * scale[None, :]
         return self.extra["covariance"]
 
 

@@ -105,6 +105,14 @@ class HeldFoot:
     terms: ThetaTerms
     dheight: np.ndarray
 
+    def take(self, index: np.ndarray) -> HeldFoot:
+        """The same linkage at heights[index]: solved once per distinct height, then spread."""
+        t = self.terms
+        flex = [None if a is None else a[index] for a in (t.flex1, t.flex2)]
+        return HeldFoot(self.inside[index], self.theta_rad[index],
+                        ThetaTerms(t.delta[index], t.ddelta[index], t.phi3[index], flex[0], flex[1]),
+                        self.dheight[index])
+
 
 class Powertrain:
     """One lift powertrain (actuator + design) with optional effects. All methods broadcast over numpy arrays."""

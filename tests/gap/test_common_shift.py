@@ -89,10 +89,11 @@ def test_a_direction_only_the_prior_pins_keeps_its_variance():
     # two parameters whose data columns are 1e8 and equal (they trade exactly on the rows, as a shift and the
     # gains do) and a prior row of 1 on the second: (J^T J)^-1 is [[1 + 2e-17, -1], [-1, 1]] exactly, but J^T J's
     # condition number is ~1e17 and a pseudo-inverse of it drops the weak direction (variance ~0)
-    from analysis.gap.problem import Fit
+    from analysis.gap.problem import Fit, Layout, Param
 
     rows = np.array([[1e8, 1e8], [2e8, 2e8], [0.0, 1.0]])
-    fit = Fit((), None, np.zeros(2), np.zeros(3), rows, {})  # type: ignore[arg-type]
+    layout = Layout((), [Param("gain", (str(i),), -1.0, 1.0, 1.0, 0.0) for i in range(2)], {}, 2, 1)
+    fit = Fit((), layout, np.zeros(2), np.zeros(3), rows, {})
     assert np.allclose(fit.covariance(), [[1.0, -1.0], [-1.0, 1.0]], rtol=1e-6)
 
 

@@ -9,19 +9,46 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from analysis.gap.engine import RunEngine, _Staircase
+from analysis.gap.engine import RunEngine
+from analysis.gap.timebase import GridPlaces, Staircase, WindowMean
 
 
 def test_the_staircase_mean_is_the_held_commands_mean_over_any_interval():
     rng = np.random.default_rng(3)
     t_cmd = np.cumsum(rng.uniform(0.2e-3, 2e-3, 60))
     v_cmd = rng.uniform(-50.0, 250.0, 60)
-    stair = _Staircase(t_cmd, v_cmd, before=0.0)
+    stair = Staircase(t_cmd, v_cmd, before=0.0)
     fine = np.linspace(t_cmd[0] - 1e-3, t_cmd[-1] + 1e-3, 400_001)
     held = np.where(fine >= t_cmd[0], v_cmd[np.clip(np.searchsorted(t_cmd, fine, "right") - 1, 0, None)], 0.0)
     for start, width in zip(rng.uniform(t_cmd[0], t_cmd[-1] - 5e-3, 20), rng.uniform(1e-4, 4e-3, 20), strict=True):
         inside = (fine >= start) & (fine < start + width)
         assert stair.mean(np.array([start]), width)[0] == pytest.approx(held[inside].mean(), abs=0.05)
+
+
+def test_a_window_mean_read_from_its_knot_table_is_the_held_commands_mean():
+    """The played drive is read from a table of the window mean at its knots (`WindowMean`): checked against the
+    held commands averaged on a fine grid, at window starts before, among and after the steps."""
+    rng = np.random.default_rng(4)
+    t_cmd = np.cumsum(rng.uniform(0.2e-3, 2e-3, 60))
+    drive, bias = rng.uniform(0.0, 250.0, 60), rng.uniform(0.0, 250.0, 60)
+    width = 1.3e-3
+    table = WindowMean([(2.0, Staircase(t_cmd, drive, 10.0)), (-1.0, Staircase(t_cmd, bias, 20.0))], width)
+    fine = np.linspace(t_cmd[0] - 5e-3, t_cmd[-1] + 5e-3, 800_001)
+    k = np.searchsorted(t_cmd, fine, "right") - 1
+    net = np.where(k >= 0, 2.0 * drive[np.clip(k, 0, None)] - bias[np.clip(k, 0, None)], 2.0 * 10.0 - 20.0)
+    starts = np.r_[t_cmd[0] - 4e-3, rng.uniform(t_cmd[0] - width, t_cmd[-1], 30), t_cmd[-1] + 1e-3]
+    for start in starts:
+        inside = (fine >= start) & (fine < start + width)
+        assert table(np.array([start]))[0] == pytest.approx(net[inside].mean(), abs=0.3)
+
+
+def test_grid_places_interpolate_as_numpy_does_inside_and_beyond_the_grid():
+    rng = np.random.default_rng(5)
+    x0, dx, n = 3.0, 1e-3, 500
+    y = rng.normal(size=n)
+    x = np.r_[x0 - 0.01, rng.uniform(x0, x0 + dx * (n - 1), 200), x0 + dx * (n - 1), x0 + 2.0]
+    got = GridPlaces.of(x, x0, dx, n).interp(y)
+    assert got == pytest.approx(np.interp(x, x0 + dx * np.arange(n), y), abs=1e-9)
 
 
 def _ramp_run(phase_s: float) -> SimpleNamespace:

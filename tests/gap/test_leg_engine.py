@@ -4,6 +4,8 @@ would show as a prediction that differs from a fresh engine's."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -41,6 +43,21 @@ def test_a_leg_runs_prediction_is_the_same_whatever_was_evaluated_before(leg_run
     pressed = seen[1] > 1e-4
     assert np.all(seen[2][pressed] < seen[1][pressed])
     assert np.all(seen[2][pressed] > 0.99 * seen[1][pressed])
+
+
+def test_a_stage_level_the_foot_never_meets_changes_nothing(leg_run):
+    """The linkage is solved at the carriage levels the force samples see, not at every level the stage took: a
+    move far out of the leg's reach (as a contact search starts) before any sample leaves the prediction alone."""
+    ts, xs = leg_run.stage_cmd
+    first = min(float(r.eval_times_s.min()) for r in leg_run.rows)
+    far = copy.copy(leg_run)
+    far.stage_cmd = (np.r_[first - 5.0, ts], np.r_[xs[0] + 0.05, xs]) if ts.size else (np.array([first - 5.0]),
+                                                                                      np.array([0.05]))
+    if far.t_contact_s is None:
+        far.t_contact_s = first - 4.0
+    for effects, nuis in (({}, RunNuisance()), ({}, RunNuisance(shift_m=5e-6, lag_s={"force_N": 2e-3}))):
+        assert np.array_equal(RunEngine(far).predict(effects, nuis), RunEngine(leg_run).predict(effects, nuis),
+                              equal_nan=True)
 
 
 def test_a_compliant_force_sensor_lowers_a_legs_reading_by_its_give():

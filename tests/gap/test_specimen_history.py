@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from analysis.gap.engine import _zoh
+from analysis.gap.timebase import zoh
 from analysis.gap.history import HISTORY_S, history_notes, segments, share_specimen_history
 
 
@@ -36,13 +36,13 @@ def test_interleaved_files_share_one_history():
         assert run.drive_history == "specimen 1: runs 0, 1"
         t = np.concatenate([r.eval_times_s for r in run.rows])
         for which, j in (("bias_cmd", 0), ("drive_cmd", 1)):
-            np.testing.assert_array_equal(_zoh(*getattr(run, which), t), _zoh(*own[k][j], t))
+            np.testing.assert_array_equal(zoh(*getattr(run, which), t), zoh(*own[k][j], t))
     # between its own repetitions the 250 V file sees the 100 V file's second repetition (its clock + 50 s)
-    assert _zoh(*high.bias_cmd, np.array([50.0 + 22.0]))[0] == 100.0
-    assert _zoh(*high.drive_cmd, np.array([50.0 + 22.0]))[0] == 100.0
+    assert zoh(*high.bias_cmd, np.array([50.0 + 22.0]))[0] == 100.0
+    assert zoh(*high.drive_cmd, np.array([50.0 + 22.0]))[0] == 100.0
     # and the 100 V file, in its pause, the 250 V file's first repetition (held at 250 V across the 250 V file's
     # own pause, where the 100 V file's first repetition ended)
-    assert _zoh(*low.bias_cmd, np.array([10.0]))[0] == 250.0
+    assert zoh(*low.bias_cmd, np.array([10.0]))[0] == 250.0
 
 
 def test_the_history_reaches_back_history_s_with_the_level_held_then():

@@ -1,12 +1,17 @@
 """The verdict a named effect would get could the data split its set (analysis.gap.verdict.settled_verdict), which
-decides whether an ambiguous set's leader is `best`: only a set that would be attributed gives one."""
+decides whether an ambiguous set's leader is `best`: only a set that would be attributed gives one; and the closure
+that verdict reads, counted over the named effects that are real on their own (`verdict.real_closure`)."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
 
 from analysis.gap import tolerances as tol
 from analysis.gap.families import FAMILIES
 from analysis.gap.results import NamedEffect
-from analysis.gap.verdict import CLOSED_MIN, best_of, settled_verdict
+from analysis.gap.verdict import CLOSED_MIN, best_of, real_closure, settled_verdict
 
 
 def test_a_size_told_from_none_that_closes_enough_is_attributed():
@@ -40,3 +45,61 @@ def test_best_is_the_first_effect_that_explains_the_gap_even_when_its_set_cannot
     assert best_of([_named("width_loss", "ambiguous", False), _named("hysteresis", "attributed", True)]) \
         == "hysteresis"
     assert best_of([_named("creep", "unexplained", False)]) is None
+
+
+def _selection(*pairs):
+    """A selection's waterfall: (added, held-out RMS after it), the nominal first; cumulative closures as
+    `ranking` writes them."""
+    rms0 = pairs[0][1]
+    steps = [SimpleNamespace(added=a, heldout=SimpleNamespace(rms=r),
+                             closed_fraction=(rms0 - r) / (rms0 - 1.0) if rms0 > 1.0 else 0.0) for a, r in pairs]
+    return SimpleNamespace(steps=steps, fits=[SimpleNamespace(values=dict)])
+
+
+class _Refits:
+    """Stand-ins for the problem and the judge: a refit of a set of effects is judged at the held-out RMS given
+    for that set."""
+
+    def __init__(self, heldout_by_names):
+        self.heldout_by_names = heldout_by_names
+        self.refitted = []
+
+    def solve(self, names, start, max_nfev):
+        self.refitted.append(tuple(names))
+        return SimpleNamespace(names=tuple(names))
+
+    def heldout(self, fit):
+        return SimpleNamespace(rms=self.heldout_by_names[fit.names])
+
+
+def test_only_effects_real_on_their_own_count_toward_the_closure():
+    # the null of self-check trial 204900029: a hysteresis closes 13 % and a d31 curve whose interval holds 0 the
+    # rest; refitted alone the hysteresis leaves 1.29, and it does not explain half the gap
+    sel = _selection((None, 1.334), ("hysteresis", 1.29), ("field_dependent_d31", 1.095))
+    est = {"hysteresis": (0.018, (0.004, 0.032)), "field_dependent_d31": (0.006, (-0.008, 0.021))}
+    refits = _Refits({("hysteresis",): 1.29})
+    closed = real_closure(refits, sel, est, refits)
+    assert refits.refitted == [("hysteresis",)]
+    assert closed == pytest.approx((1.334 - 1.29) / 0.334)
+    assert settled_verdict("hysteresis", est["hysteresis"][1], closed)[0] == "unexplained"
+    # external-lab case 4316: the d31 curve named first ends at zero once the hysteresis is in, and the
+    # hysteresis refitted alone closes the gap: its own late step's share does not decide
+    sel = _selection((None, 3.0), ("field_dependent_d31", 1.6), ("hysteresis", 1.05))
+    est = {"field_dependent_d31": (0.001, (-0.01, 0.012)), "hysteresis": (0.06, (0.03, 0.09))}
+    closed = real_closure(_Refits({("hysteresis",): 1.08}), sel, est, _Refits({("hysteresis",): 1.08}))
+    assert closed == pytest.approx((3.0 - 1.08) / 2.0)
+    # every named effect real: the final model's closure, no refit
+    refits = _Refits({})
+    est["field_dependent_d31"] = (0.3, (0.1, 0.5))
+    assert real_closure(refits, sel, est, refits) == pytest.approx((3.0 - 1.05) / 2.0) and not refits.refitted
+    # a fabrication shift within its tolerance band is specimen scatter and does not count either
+    band = tol.band("width_loss", FAMILIES["width_loss"].tolerance)
+    sel = _selection((None, 3.0), ("width_loss", 1.5), ("hysteresis", 1.4))
+    est = {"width_loss": (0.0, (-0.5 * band, 0.5 * band)), "hysteresis": (0.1, (0.05, 0.15))}
+    refits = _Refits({("hysteresis",): 2.8})
+    assert real_closure(refits, sel, est, refits) == pytest.approx(0.2 / 2.0)
+    # nothing real, or no gap above the floor: nothing closed
+    est = {"width_loss": (0.0, (-0.5 * band, 0.5 * band)), "hysteresis": (0.0, (-0.05, 0.15))}
+    assert real_closure(_Refits({}), sel, est, _Refits({})) == 0.0
+    assert real_closure(_Refits({}), _selection((None, 0.9), ("hysteresis", 0.8)),
+                        {"hysteresis": (0.1, (0.05, 0.15))}, _Refits({})) == 0.0
