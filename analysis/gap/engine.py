@@ -385,20 +385,13 @@ class RunEngine:
                 a = tol.scaled(a, name, value.strength)
         return tol.with_gains(a, gains[0], gains[1])
 
-    def surface_at(self, t: np.ndarray, backlash_m: float) -> np.ndarray:
-        """Stage carriage position relative to the run's contact position (play on the target sequence)."""
-        return self.surface_levels(backlash_m)[self.stage_index(t)]
-
-    def stage_index(self, t: np.ndarray) -> np.ndarray:
-        """Per time, which of `surface_levels` the carriage holds (0: before the first command)."""
-        ts, _ = self.run.stage_cmd
-        return np.searchsorted(ts, t, "right") if ts.size else np.zeros(t.shape, np.intp)
-
     def _stage_index_at(self, times_key: tuple, t: np.ndarray) -> np.ndarray:
-        """`stage_index` of a row set's (lagged) force sample times, kept per (times, lags)."""
+        """Per (lagged) force sample time of a row set, which of `surface_levels` the carriage holds (0: before
+        the first command); kept per (times, lags)."""
         index = _recall(self._stage_at, times_key)
         if index is None:
-            index = self.stage_index(t)
+            ts, _ = self.run.stage_cmd
+            index = np.searchsorted(ts, t, "right") if ts.size else np.zeros(t.shape, np.intp)
             _keep(self._stage_at, times_key, index)
         return index
 

@@ -79,6 +79,7 @@ def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray
     out = np.zeros(n)
     spreads = np.ones(n)
     prior_rows = p.prior_rows(lay)
+    scales = lay.scales()
     for g in groups:
         rows = np.zeros(n, bool)
         for k, e in enumerate(p.engines):
@@ -91,7 +92,7 @@ def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray
         for c in cols:
             for j in prior_rows.get(c, []):
                 train[n + j] = False
-        scale = lay.scales()[keep_cols]
+        scale = scales[keep_cols]
         step, *_ = np.linalg.lstsq(fit.jac[np.ix_(train, keep_cols)] * scale, -fit.residual[train], rcond=1e-10)
         step *= scale
         x0 = fit.x.copy()
