@@ -43,7 +43,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from analysis.gap.history import history_notes, share_specimen_history
+from analysis.gap.history import history_notes, segments_of, share_specimen_history
 from analysis.gap.moderation import squeeze
 from analysis.sessions import session_key
 from hamr_bench.errors import ConfigError, RecordingError
@@ -116,6 +116,7 @@ class RunTrace:
     force_reads_pull: bool = False       # the force goes clearly negative: the sensor reads pull, no clip at 0
     clock_offset_s: float = 0.0          # the importer's shift of this block (its file's time = ours - offset)
     drive_history: str = "own"           # own | the runs whose timelines it shares (analysis.gap.history)
+    recorded_s: tuple[tuple[float, float], ...] = ()   # the block's sensors' recorded stretches (start, end)
 
     def provenance(self) -> dict[str, Any]:
         """JSON-ready: where this run's data and timelines came from, and its grouping."""
@@ -344,7 +345,8 @@ def load_runs(path: Path | str, first_index: int = 0) -> list[RunTrace]:
             t_end_s=float(parsed.events[-1].time_s) if parsed.events else 0.0,
             specimen=specimen, session=session, session_rule=rule, timelines=dict(timelines.sources),
             source=meta.source, contact=contact_kind, force_reads_pull=reads_pull(force),
-            clock_offset_s=_clock_offset(parsed.events, block))
+            clock_offset_s=_clock_offset(parsed.events, block),
+            recorded_s=tuple(segments_of(np.concatenate([tf, tc]))))
         if len(blocks) > 1:
             run.t_end_s = block.end_s
         sensors = {"force_N": (tf, force), "displacement_m": (tc, disp)}

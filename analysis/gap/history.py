@@ -24,19 +24,34 @@ SEGMENT_GAP_S = 0.5     # a pause longer than this between samples ends a record
 HISTORY_S = 10.0
 
 
-def segments(run: Any) -> list[tuple[float, float]]:
-    """The run's recorded stretches in its own clock: its drive timeline's and its rows' sample times (reference
-    samples included), split where nothing was recorded for SEGMENT_GAP_S."""
-    parts = [run.drive_cmd[0]] + [r.eval_times_s for r in run.rows] \
-        + [r.ref_times_s for r in run.rows if r.ref_times_s is not None]
-    recorded = [np.asarray(p, float) for p in parts if len(p)]
-    if not recorded:
+def segments_of(times: np.ndarray) -> list[tuple[float, float]]:
+    """Sample times as recorded stretches: split where nothing was recorded for SEGMENT_GAP_S."""
+    t = np.unique(np.asarray(times, float))
+    if t.size == 0:
         return []
-    t = np.unique(np.concatenate(recorded))
     cut = np.flatnonzero(np.diff(t) > SEGMENT_GAP_S)
     starts = np.r_[0, cut + 1]
     ends = np.r_[cut, t.size - 1]
     return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def segments(run: Any) -> list[tuple[float, float]]:
+    """The run's recorded stretches in its own clock: its sensors' (`run.recorded_s`, where the loader gave them),
+    its drive timeline's and its rows' sample times (reference samples included). A stretch starts at its first
+    sample, not at its first cycle: a lab's file holds the low dwell before the first ramp, and a later file's
+    level would otherwise hold over it."""
+    parts = [run.drive_cmd[0]] + [r.eval_times_s for r in run.rows] \
+        + [r.ref_times_s for r in run.rows if r.ref_times_s is not None]
+    recorded = [np.asarray(p, float) for p in parts if len(p)]
+    own = segments_of(np.concatenate(recorded)) if recorded else []
+    spans = sorted(own + [tuple(map(float, s)) for s in getattr(run, "recorded_s", ())])
+    out: list[tuple[float, float]] = []
+    for a, b in spans:
+        if out and a - out[-1][1] <= SEGMENT_GAP_S:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
 
 
 def _specimen_key(run: Any) -> tuple | None:

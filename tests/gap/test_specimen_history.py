@@ -68,6 +68,19 @@ def test_restarting_clocks_native_runs_and_unlabelled_specimens_keep_their_own()
         assert r.bias_cmd is bias and r.drive_cmd is drive
 
 
+def test_a_stretch_starts_at_the_first_sensor_sample_not_at_the_first_cycle():
+    # the 100 V file's sensors (and its bias step) start 0.3 s before its first ramp, in its low dwell; the 250 V
+    # file was recorded just before. A lag reads that dwell: it must hold the run's own bias, not the other file's
+    high = _run(1, [(5.0, 9.6)], 250.0)
+    low = _run(0, [(10.0, 14.0)], 100.0)
+    low.bias_cmd = (np.array([9.7, 15.0]), np.array([100.0, 100.0]))
+    low.recorded_s = ((9.7, 14.0),)
+    assert segments(low) == [(9.7, 14.0)]
+    share_specimen_history([low, high])
+    assert zoh(*low.bias_cmd, np.array([9.72]))[0] == 100.0
+    assert zoh(*low.bias_cmd, np.array([9.65]))[0] == 250.0     # before it, the 250 V file's level still holds
+
+
 def test_segments_split_at_pauses():
     run = _run(0, [(0.0, 4.0), (20.0, 24.0)], 100.0)
     (a0, b0), (a1, b1) = segments(run)
