@@ -76,6 +76,9 @@ def format_text(result: dict) -> str:
     for c in result["cannot_separate"]:
         lines.append(f"  cannot separate {', '.join(c['effects'])}: "
                      + "; ".join(f"{k}: {v}" for k, v in c["separated_by"].items() if v))
+    if result.get("turned_down"):
+        lines += ["", "tried next, none passing:"]
+        lines += [f"  {c['effect']:22s} {c['why']}" for c in result["turned_down"]]
     rest = result["unexplained"]
     lines += ["", f"left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise"
               + (" (at the noise floor)" if rest["at_noise_floor"] else ""),

@@ -170,6 +170,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                      best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
-                     specimen_population=population, detection_limits=detection_limits(p))
+                     specimen_population=population, detection_limits=detection_limits(p),
+                     turned_down=sel.rejected)
     diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
     return diag

@@ -51,6 +51,9 @@ class Family:
     shapes: dict[str, Shape] = field(default_factory=dict)
     tolerance: float = 0.0         # fabrication shifts: the parameter's 1-sigma tolerance (fraction)
     scale: float = 1.0             # typical strength (finite-difference and solver scale)
+    # Shape settings the coarse strength grid tries besides the defaults: at strength 0 a shape has no gradient,
+    # so a form far from the default is reached only from a start near it.
+    grid_shapes: tuple[dict[str, float], ...] = ()
 
 
 def _one_sided(tolerance: float, hi: float) -> tuple[float, float]:
@@ -64,8 +67,8 @@ def _one_sided(tolerance: float, hi: float) -> tuple[float, float]:
 FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("hysteresis", "largest rise/fall gap of the net drive / span, full drive cycle (250 V)", (0.0, 0.3),
            "plays on each plate's unipolar range (threshold density ~ r^gamma), tips on the first rise", "drive",
-           {"density_exponent": Shape(0.0, -0.8, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
-           scale=0.05),
+           {"density_exponent": Shape(0.0, -2.0, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
+           scale=0.05, grid_shapes=({"density_exponent": -1.0},)),
     Family("creep", "growth from 50 to 400 ms after a step, per decade (fraction of the step)", (0.0, 0.12),
            "power-law superposition of drive increments (log law at n = 0)", "drive",
            {"exponent": Shape(0.0, -0.8, 0.6, 0.3)}, scale=0.01),

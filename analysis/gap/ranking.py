@@ -179,9 +179,10 @@ def _judged(p: Problem, current: Fit, tried: dict[str, Fit], judge: Judge, n_poo
         if name not in judged:
             judged[name] = (judge.heldout(f), judge.reduction_ci(current, f))
         ho, ci = judged[name]
-        rows.append(StepCandidate(name, improvement(current, f, scale2), ho, ci, float(f.effects[name].strength)))
+        rows.append(StepCandidate(name, improvement(current, f, scale2), ho, ci, float(f.effects[name].strength),
+                                  _step_bar(p, scale2, n_pool, name)))
     rows.sort(key=lambda c: c.heldout.rms)
-    passing = [c for c in rows if c.reduction_ci95[0] > 0 and c.improvement > _step_bar(p, scale2, n_pool, c.name)]
+    passing = [c for c in rows if c.reduction_ci95[0] > 0 and c.improvement > c.bar]
     return rows, passing, scale2
 
 

@@ -63,34 +63,35 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = []
-    for run in problem.data.runs:
-        for mode in sorted({r.mode for r in run.rows}):
-            panels.append((run, mode))
+    panels = _overlay_panels(problem)
     n = len(panels)
+    if n == 0:
+        fig, ax = plt.subplots(figsize=(5, 2))
+        ax.text(0.5, 0.5, "no settled rows (high dwell, hold) to overlay", ha="center", va="center")
+        ax.axis("off")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return
     cols = min(n, 3)
     rows_n = int(np.ceil(n / cols))
     fig, axes = plt.subplots(rows_n, cols, figsize=(5 * cols, 3.6 * rows_n), squeeze=False)
-    for ax, (run, mode) in zip(axes.flat, panels):
-        idx = [i for i, r in enumerate(problem.rows) if r.run == run.index and r.mode == mode
-               and r.phase in ("high_late", "hold")]
-        if not idx:
-            ax.axis("off")
-            continue
+    for ax, ((k, mode), idx) in zip(axes.flat, panels.items()):
+        run = problem.data.runs[k]
         rows = [problem.rows[i] for i in idx]
         # against sag where the rows sweep it (sag sweeps, static loads, an actuator's stiffness steps at 0 V)
-        use_sag = run.protocol in ("sag-sweep", "static") or len({r.voltage_V for r in rows}) == 1
+        use_sag = run.protocol in ("sag-sweep", "static") or len({round(r.voltage_V) for r in rows}) == 1
         x = np.array([r.sag_m * 1e3 if use_sag else r.voltage_V for r in rows])
         scale = 1e3 if rows[0].quantity == "force_N" else 1e6
         unit = "mN" if rows[0].quantity == "force_N" else "um"
         order = np.argsort(x, kind="stable")
         ax.errorbar(x, problem.y[idx] * scale, yerr=2 * problem.sigma[idx] * scale, fmt="o", ms=3, color="k",
                     label="measured (+-2 se)")
-        for fit, style, name in ((fit0, "--", "nominal"), (fit1, "-", label)):
-            ax.plot(x[order], fit[idx][order] * scale, style, label=name)
+        for fit, style, name in ((fit0, "x--", "nominal"), (fit1, "+-", label)):
+            ax.plot(x[order], fit[idx][order] * scale, style, ms=6, label=name)
         ax.set_xlabel("sag (mm)" if use_sag else "bias voltage (V)")
         ax.set_ylabel(f"{rows[0].quantity.split('_')[0]} ({unit})")
         who = f"design {run.design}" if run.fixture == "leg" else f"{run.layers}-layer actuator"
+        who += f", specimen {run.specimen}" if run.specimen else ""
         ax.set_title(f"{run.protocol} {mode} ({who})".replace("  ", " "), fontsize=9)
         ax.legend(fontsize=7)
     for ax in list(axes.flat)[n:]:
@@ -140,6 +141,22 @@ def waterfall_png(result: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def _overlay_panels(problem) -> dict[tuple[int, str], list[int]]:
+    """(first run's index, mode) -> the indices of the rows one overlay panel shows: each run's settled rows (the high
+    dwell's late part, an undriven hold). An actuator specimen's runs share a panel (an imported trace holds one
+    bias voltage per file, so alone each would be one point); a leg run sweeps sag within itself and keeps its own."""
+    panels: dict[tuple[int, str], list[int]] = {}
+    first: dict[tuple, int] = {}
+    for i, r in enumerate(problem.rows):
+        if r.phase not in ("high_late", "hold"):
+            continue
+        run = problem.data.runs[r.run]
+        own = run.fixture == "leg" or run.protocol in ("sag-sweep", "static")
+        key = (run.index,) if own else (run.protocol, run.fixture, run.layers, run.specimen, run.session)
+        panels.setdefault((first.setdefault(key, run.index), r.mode), []).append(i)
+    return panels
+
+
 def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -179,6 +196,9 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     for c in result["cannot_separate"]:
         lines += ["", f"The data cannot separate {', '.join(c['effects'])}. Measurements that would: "
                   + "; ".join(f"{k}: {v}" for k, v in c["separated_by"].items() if v) + "."]
+    if result.get("turned_down"):
+        lines += ["", "Tried next, none passing:", ""]
+        lines += [f"- {c['effect']}: {c['why']}" for c in result["turned_down"]]
     rest = result["unexplained"]
     lines += ["", f"Left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise "
               f"[{rest['heldout_rms_ci95'][0]:.2f}, {rest['heldout_rms_ci95'][1]:.2f}]"

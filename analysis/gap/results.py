@@ -47,10 +47,22 @@ class StepCandidate:
     heldout: HeldOut
     reduction_ci95: tuple[float, float]   # of the held-out RMS relative to the base model
     strength: float
+    bar: float = float("nan")     # the step's likelihood-ratio bar its improvement had to pass
 
     def to_json(self) -> dict[str, Any]:
         return {"effect": self.name, "improvement_chi2": self.improvement, "heldout": self.heldout.to_json(),
                 "reduction_ci95": list(self.reduction_ci95), "strength": self.strength}
+
+    def why_not(self) -> str:
+        """Why a candidate tried at a step did not pass it, in words."""
+        reasons = []
+        if self.reduction_ci95[0] <= 0:
+            reasons.append(f"its held-out reduction is not above 0 with 95 % confidence ({self.reduction_ci95[0]:.2f} "
+                           f"to {self.reduction_ci95[1]:.2f}; held-out {self.heldout.rms:.2f})")
+        if not self.improvement > self.bar:
+            reasons.append(f"its in-sample improvement {self.improvement:.4g} is below the step's bar "
+                           f"{self.bar:.4g}")
+        return "; ".join(reasons) or "it passed, and another candidate was taken"
 
 
 @dataclass
@@ -125,6 +137,8 @@ class Diagnosis:
     specimen_population: dict[str, Any] = field(default_factory=dict)
     detection_limits: dict[str, Any] = field(default_factory=dict)
     fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
+    # the candidates the step after the last named effect tried, none passing (why the selection stopped there)
+    turned_down: list[StepCandidate] = field(default_factory=list)
 
     def ranking(self) -> list[dict[str, Any]]:
         """Named effects first (waterfall order), each ambiguous one followed by the others of its set (the
@@ -162,7 +176,8 @@ class Diagnosis:
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
                 "heldout_units": "noise units (z = held-out residual / pure-error standard error / the nominal "
                                  "fit's predictive spread there, the same for every model); 1 = the noise floor",
-                "recordings": self.recordings, "elapsed_s": self.elapsed_s}
+                "recordings": self.recordings, "elapsed_s": self.elapsed_s,
+                "turned_down": [{**c.to_json(), "bar_chi2": c.bar, "why": c.why_not()} for c in self.turned_down]}
 
 
 def _set_member_entry(named: NamedEffect, row: StepCandidate) -> dict[str, Any]:

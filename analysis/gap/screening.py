@@ -41,12 +41,16 @@ def grid_best(p: Problem, base: Fit, name: str) -> tuple[float, dict[tuple, floa
     grid = [s * f.scale for s in (-4, -2, -1, -0.5, 0.5, 1, 2, 4, 8)]
     grid = sorted({min(max(g, lo), hi) for g in grid if lo <= g <= hi or (lo < g and hi == math.inf)})
     starts = [{**start, ("strength", name): s} for s in grid]
+    for alt in f.grid_shapes:
+        shapes = {("shape", name, k): v for k, v in alt.items()}
+        starts += [{**start, **shapes, ("strength", name): s} for s in grid]
+    plain = list(starts)
     if f.kind == "drive":
         # A drive effect and a sensor chain's lag trade on a ramp (a lag fitted without the effect stands in for a
         # loop): each strength is also tried with each fixture's lags at zero, and the best start kept.
         for fixture in sorted({k[1] for k in start if k[0] == "lag"}):
             zero = {k: 0.0 for k in start if k[0] == "lag" and k[1] == fixture}
-            starts += [{**s0, **zero} for s0 in starts[:len(grid)]]
+            starts += [{**s0, **zero} for s0 in plain]
     if f.kind in ("params", "contact"):
         # A fabrication shift and the specimens' gains trade exactly on the rows (a linear series spring on the
         # actuator's blocked force nearly so): moved alone from the base fit it spoils what the gains fitted, and a

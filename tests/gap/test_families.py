@@ -271,3 +271,49 @@ def test_d31_knee_family_reaches_the_benchs_logistic_switch_in_field(switch, wid
     best = min((minimize(misfit, [k, p], method="Nelder-Mead") for k in (-0.3, 0.0, 0.3) for p in (2.0, 6.0)),
                key=lambda r: r.fun)
     assert best.fun < 0.05
+
+
+def _bouc_wen(u, alpha, beta_plus_gamma):
+    """Bouc-Wen (n = 1, beta = gamma) on the net drive, sample by sample: y = u - h, dh = alpha du - beta |du| h -
+    gamma du |h|. Rate-independent; its loop widens with amplitude and saturates at alpha / (beta + gamma)."""
+    h, out, b = 0.0, [], beta_plus_gamma / 2
+    for i, ui in enumerate(u):
+        du = ui - u[i - 1] if i else 0.0
+        h += alpha * du - b * abs(du) * h - b * du * abs(h)
+        out.append(ui - h)
+    return np.array(out)
+
+
+def test_hysteresis_family_follows_a_bouc_wen_loop_across_bias_voltages():
+    """A form the family does not share (Bouc-Wen on the net drive, its loop saturating from ~80 V on) on
+    bias-drive-ground cycles at 100, 175 and 250 V, one gain for all (a specimen's), the first cycle left out: the
+    family within its shape bounds leaves less than a fifth of the loop's rms. With the density exponent bounded
+    at -0.8, as before it reached the scale-free -1 and below, it left 33 % (14 % now)."""
+    from scipy.optimize import minimize
+
+    ramp = np.linspace(0.0, 1.0, 120)
+    cycle = np.r_[np.zeros(60), ramp, np.ones(100), ramp[::-1]]
+    cases = []
+    for v in (100.0, 175.0, 250.0):
+        drive = np.tile(cycle, 3) * v
+        truth = _bouc_wen(2 * drive - v, 0.3, 0.03) / 250.0
+        x_b, x_t = drive / 250.0, (v - drive) / 250.0
+        cases.append((x_b, op.plate_memory(x_b), x_t, op.plate_memory(x_t), truth, np.arange(drive.size) >= cycle.size))
+    shapes = FAMILIES["hysteresis"].shapes
+    gamma, tip = shapes["density_exponent"], shapes["tip_share"]
+    truths = [t[k] for *_, t, k in cases]
+
+    def left(pred):     # rms of what the best common gain leaves
+        gain = sum(p @ q for p, q in zip(pred, truths, strict=True)) / sum(p @ p for p in pred)
+        return math.sqrt(sum(float(np.sum((gain * p - q) ** 2)) for p, q in zip(pred, truths, strict=True)))
+
+    def family(z):
+        c = float(np.clip(z[2], tip.lo, tip.hi))
+        w = op.plate_weights(max(float(z[0]), 0.0), float(np.clip(z[1], gamma.lo, gamma.hi)), c)
+        return left([(op.plate_hysteresis(xb, mb, w, c) - op.plate_hysteresis(xt, mt, w, c))[k]
+                     for xb, mb, xt, mt, _, k in cases])
+
+    loop = left([(xb - xt)[k] for xb, _, xt, _, _, k in cases])     # about the best straight line
+    best = min((minimize(family, [0.05, g0, 1.0], method="Nelder-Mead", options={"maxiter": 200})
+                for g0 in (-1.5, 0.0)), key=lambda r: r.fun)
+    assert best.fun / loop < 0.2
