@@ -4,11 +4,10 @@ serial port (9600 8N1 default, command + CR, replies end CR LF).
 Implements `hamr_bench.interfaces.ForceSensor` in newtons: identify (MODEL and serial number), units,
 capacity, tare, single reading, streaming with a clean stop. Opening the port stops and drains a sensor an
 earlier program left streaming (CR, read until quiet, CR -> `A`). Readings are converted from the sensor's
-unit (lb, kg, g, N, kN, oz; millipounds on iLoad). A reading beyond the capacity is a DeviceFault (overload);
-the
-runner checks force limits of its own too. What each interface family accepts and answers is Loadstar's
-published
-command pages, as tables in `hamr_bench.instruments.loadstar_reference`."""
+unit (lb, kg, g, N, kN, oz; millipounds on iLoad). The zero is kept here, never in the sensor (its tare command
+is not sent), so every reading the sensor sends is the load on it: a reading beyond the capacity is a DeviceFault
+(overload) whenever it comes; the runner checks force limits of its own too. What each interface family accepts
+and answers is Loadstar's published command pages, as tables in `hamr_bench.instruments.loadstar_reference`."""
 
 from __future__ import annotations
 
@@ -37,7 +36,7 @@ class LoadstarSensor:
         command_set: str = "di1000",
         baudrate: int = 9600,
         timeout_s: float = 0.5,
-        tare_timeout_s: float = 3.0,
+        tare_readings: int = 16,
         drain_quiet_s: float = 0.05,
         stream_rate_Hz: float = 150.0,
         capacity_N: float | None = None,
@@ -50,7 +49,10 @@ class LoadstarSensor:
         self.device = device
         self.family = FAMILIES[command_set]
         self.timeout_s = float(timeout_s)
-        self.tare_timeout_s = float(tare_timeout_s)
+        if not (isinstance(tare_readings, int) and tare_readings >= 1):
+            raise ConfigError(f"{device}: tare_readings must be a whole number >= 1, got {tare_readings!r}")
+        self.tare_readings = tare_readings
+        self._zero_N = 0.0  # the tare: what the sensor read with nothing on it, taken off every reading
         self.drain_quiet_s = float(drain_quiet_s)
         self.stream_rate_Hz = float(stream_rate_Hz)
         self._streaming = False
@@ -109,7 +111,8 @@ class LoadstarSensor:
             raise DeviceProtocolError(f"{self.device}: {what} reply {text!r} is not a number", self.device)
         return value
 
-    def _to_N(self, text: str, time_s: float) -> float:
+    def _gross_N(self, text: str, time_s: float) -> float:
+        """The load on the sensor a reading says, before the tare; DeviceFault beyond the capacity."""
         force_N = self._number(text, "reading") * self._newtons_per_reading_unit
         if abs(force_N) > self._capacity_N:
             raise DeviceFault(
@@ -118,6 +121,9 @@ class LoadstarSensor:
                 self.device,
             )
         return force_N
+
+    def _to_N(self, text: str, time_s: float) -> float:
+        return self._gross_N(text, time_s) - self._zero_N
 
     def _stop_and_drain(self) -> None:
         """CR stops a stream; discard everything until the line is quiet; CR must then answer `A`."""
@@ -142,18 +148,23 @@ class LoadstarSensor:
     def capacity_N(self) -> float:
         return self._capacity_N
 
+    @property
+    def zero_N(self) -> float:
+        """The load the last tare found on the sensor (its reading then), taken off every reading since."""
+        return self._zero_N
+
     def tare(self) -> None:
-        # One reading first: a sensor already saturated would be zeroed at its saturation level by the tare
-        # and
-        # then read 0 whatever pushed on it (a contact search would drive the leg into it blind). The reading
-        # raises DeviceFault (overload) beyond capacity, as the Nano17 driver does on its tare.
-        self.read_N()
-        command = self._command("tare")
-        reply = self._line.query(command, timeout_s=self.tare_timeout_s)
-        if reply.upper() not in {expected.upper() for expected in self.family.tare_replies}:
-            expected = " or ".join(repr(text) for text in self.family.tare_replies)
-            message = f"{self.device}: expected {expected} after {command}, got {reply!r}"
-            raise DeviceProtocolError(message, self.device)
+        """The zero is the mean of `tare_readings` single readings, each checked against the capacity.
+
+        Not the sensor's own tare (CT0): a sensor that saturates while it tares zeroes at its saturation level and
+        then reads ~0 whatever pushes on it, so no later reading could show the overload and a contact search
+        would drive the leg into it blind. Kept here, every reading is the load on the sensor and is checked
+        before the zero is taken off."""
+        command = self._command("read")
+        total_N = 0.0
+        for _ in range(self.tare_readings):
+            total_N += self._gross_N(self._line.query(command), self.clock.now_s())
+        self._zero_N = total_N / self.tare_readings
 
     def read_N(self) -> float:
         reply = self._line.query(self._command("read"))

@@ -159,9 +159,9 @@ _TARE = {b"CT0\r", b"TARE\r"}
 
 
 def loadstar_calls(exchanges: Sequence[Exchange]) -> tuple[dict[str, Any], list[Call]]:
-    """Settings and calls of a Loadstar conversation: the open (CR, drain, CR -> A, units, capacity),
-    readings,
-    tares (a reading, then the tare), identify, and streams (start, everything streamed, stop)."""
+    """Settings and calls of a Loadstar conversation: the open (CR, drain, CR -> A, units, capacity), readings,
+    identify, and streams (start, everything streamed, stop). The driver tares with readings, so its tares replay
+    as readings; a sensor tare (CT0) was sent by an earlier driver, whose conversation this one cannot make."""
     sent = [s for s, _ in exchanges]
     family = "iload" if b"SLC\r" in sent or b"O0W1\r" in sent else "di1000"
     open_length = next((k + 1 for k, s in enumerate(sent) if s in (b"LC\r", b"SLC\r")), 0)
@@ -172,10 +172,11 @@ def loadstar_calls(exchanges: Sequence[Exchange]) -> tuple[dict[str, Any], list[
     i = open_length
     while i < len(exchanges):
         s = sent[i]
-        if s in _READ and i + 1 < len(exchanges) and sent[i + 1] in _TARE:
-            calls.append(Call("tare", [], list(exchanges[i:i + 2])))
-            i += 2
-        elif s in _READ:
+        if s in _TARE:
+            message = (f"exchange {i} is a sensor tare ({s!r}): recorded with a driver that tared in the sensor; "
+                       "this one keeps the zero itself and sends readings instead (re-record the run)")
+            raise RecordingError(message)
+        if s in _READ:
             calls.append(Call("read_N", [], [exchanges[i]]))
             i += 1
         elif s in _STREAM:

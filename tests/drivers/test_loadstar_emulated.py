@@ -103,6 +103,16 @@ def test_stream_rate_and_clean_stop(transport):
     assert sensor.read_N() == pytest.approx(0.7, abs=5 * RESOLUTION_N)
 
 
+def test_an_overload_that_begins_during_the_tare_is_caught_then_and_ever_after(transport):
+    # The sensor's own tare would have zeroed at the saturation level and read ~0 from then on.
+    sensor, emulator, clock = transport(tare_readings=16)
+    emulator.faults.inject("overload", at_s=clock.now_s() + 0.05)  # ~16 readings take ~0.2 s at 9600 baud
+    with pytest.raises(DeviceFault, match="overload"):
+        sensor.tare()
+    with pytest.raises(DeviceFault, match="overload"):
+        sensor.read_N()
+
+
 @pytest.mark.parametrize(
     "fault,error",
     [("no_reply", DeviceTimeout), ("garbage_bytes", DeviceProtocolError), ("dropped_bytes", DeviceTimeout),

@@ -1,13 +1,14 @@
 """Byte-exact tests of the Loadstar driver on both command sets, written from the Loadstar command lists
-(command + CR; replies end CR LF; CR alone answers `A`; tare answers `Tared`; W / O0W1 one reading, WC / O0W0
-stream until CR) and the unit definitions (1 lbf = 4.4482216152605 N, 1 kgf = 9.80665 N)."""
+(command + CR; replies end CR LF; CR alone answers `A`; W / O0W1 one reading, WC / O0W0 stream until CR; the
+driver tares in software and never sends the sensor's CT0) and the unit definitions (1 lbf = 4.4482216152605 N,
+1 kgf = 9.80665 N)."""
 
 import pytest
 
 from drivers.loadstar import LoadstarSensor
 from drivers.testing import expected_protocol, scripted_port
 from hamr_bench.clock import VirtualClock
-from hamr_bench.errors import DeviceFault, DeviceProtocolError, DeviceTimeout
+from hamr_bench.errors import ConfigError, DeviceFault, DeviceProtocolError, DeviceTimeout
 
 LBF_N = 4.4482216152605
 KGF_N = 9.80665
@@ -85,26 +86,40 @@ def test_iload_reads_millipounds_and_capacity_in_pounds():
         assert sensor.identify() == ("iLoad Pro", "A1B2")
 
 
-def test_tare_both_command_sets():
-    # a tare reads once first (a saturated sensor must not be zeroed at its saturation level)
-    script = OPEN_DI1000 + [(b"W\r", b"0.012\r\n"), (b"CT0\r", b"Tared\r\n")]
-    with expected_protocol(LoadstarSensor, script) as sensor:
+def test_tare_is_the_mean_of_readings_kept_in_the_driver_and_sends_no_sensor_tare():
+    # CT0 is never sent (a sensor saturated while it tares would read ~0 ever after); the zero is the readings'
+    # mean, taken off every later reading
+    script = OPEN_DI1000 + [(b"W\r", b"0.010\r\n"), (b"W\r", b"0.014\r\n"), (b"W\r", b"1.012\r\n")]
+    with expected_protocol(LoadstarSensor, script, tare_readings=2) as sensor:
         sensor.tare()
-    script = OPEN_ILOAD + [(b"O0W1\r", b"12\r\n"), (b"CT0\r", b"A\r\n")]  # an iLoad acknowledges with A
-    with expected_protocol(LoadstarSensor, script, command_set="iload") as sensor:
+        assert sensor.zero_N == pytest.approx(0.012 * LBF_N)
+        assert sensor.read_N() == pytest.approx(1.0 * LBF_N)
+    script = OPEN_ILOAD + [(b"O0W1\r", b"12\r\n"), (b"O0W1\r", b"1012\r\n")]  # millipounds
+    with expected_protocol(LoadstarSensor, script, command_set="iload", tare_readings=1) as sensor:
         sensor.tare()
+        assert sensor.read_N() == pytest.approx(1.0 * LBF_N)
 
 
-def test_tare_of_a_saturated_sensor_is_an_overload_fault_and_sends_no_tare():
-    with expected_protocol(LoadstarSensor, OPEN_DI1000 + [(b"W\r", b"10.500\r\n")]) as sensor:
+def test_a_sensor_that_saturates_during_the_tare_is_an_overload_fault():
+    script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"W\r", b"15.000\r\n")]
+    with expected_protocol(LoadstarSensor, script, tare_readings=3) as sensor:
         with pytest.raises(DeviceFault, match="overload"):
             sensor.tare()
 
 
-def test_tare_with_a_wrong_answer_is_a_protocol_error():
-    script = OPEN_DI1000 + [(b"W\r", b"0.000\r\n"), (b"CT0\r", b"0.000\r\n")]
-    with expected_protocol(LoadstarSensor, script) as sensor, pytest.raises(DeviceProtocolError, match="Tared"):
+def test_overload_is_checked_on_the_load_before_the_tare_is_taken_off():
+    # tared at 9 lb of a 10 lb sensor: 10.5 lb on it is an overload though it reads 1.5 lb above the zero
+    script = OPEN_DI1000 + [(b"W\r", b"9.000\r\n"), (b"W\r", b"10.500\r\n")]
+    with expected_protocol(LoadstarSensor, script, tare_readings=1) as sensor:
         sensor.tare()
+        with pytest.raises(DeviceFault, match="overload"):
+            sensor.read_N()
+
+
+@pytest.mark.parametrize("count", [0, -2, 1.5, "3"])
+def test_tare_readings_must_be_a_positive_whole_number(count):
+    with pytest.raises(ConfigError, match="tare_readings"):
+        LoadstarSensor("loop://", VirtualClock(), tare_readings=count)
 
 
 def test_reading_beyond_capacity_is_an_overload_fault():

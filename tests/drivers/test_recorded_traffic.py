@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.traffic_tests import load_driver_test, replay_driver_test
+from drivers.traffic_tests import load_driver_test, loadstar_calls, replay_driver_test
+from hamr_bench.errors import RecordingError
 from hamr_bench.clock import VirtualClock
 from sim_devices.loadstar_emulator import LoadstarEmulator, LoadstarParams
 from sim_devices.smc100_emulator import Smc100Emulator, Smc100Params
@@ -74,3 +75,11 @@ def test_emulator_settings_in_the_files_are_real_parameters():
     for path in FILES:
         test = load_driver_test(path)
         assert set(test.emulator) <= fields[test.driver], path.name
+
+
+def test_a_conversation_with_a_sensor_tare_is_refused_with_the_exchange_named():
+    # an earlier driver tared in the sensor (a reading, then CT0); this one cannot make that conversation
+    exchanges = [(b"\r", b"A\r\n"), (b"UNITS\r", b"KG\r\n"), (b"LC\r", b"0.100\r\n"), (b"W\r", b"0.00001\r\n"),
+                 (b"CT0\r", b"Tared\r\n")]
+    with pytest.raises(RecordingError, match=r"exchange 4 is a sensor tare \(b'CT0\\r'\).*re-record"):
+        loadstar_calls(exchanges)

@@ -42,8 +42,11 @@ def test_injected_fault_fails_safe_and_keeps_earlier_data(tmp_path, capsys, faul
     assert reason_part in reader.metadata()["run_end"]["reason"]
     fault_s = float(fault.rsplit("@", 1)[1])
     force_t = reader.scalars("/force")["time_s"]
-    # The sensor streams ~137 lines/s (9600 baud): everything up to the fault is there.
-    assert force_t.max() > fault_s - 0.1
+    # The sensor streams ~137 lines/s (9600 baud): everything read before the fault is there. A disconnect also
+    # takes the lines not yet read with it, and the stream is not read while a stage move blocks: up to one
+    # contact-search move, ~0.2 s (docs/reliability.md, "Not covered").
+    unread_s = 0.25 if "disconnect" in fault else 0.1
+    assert force_t.max() > fault_s - unread_s
     assert np.sum(force_t < fault_s - 1.0) > 100 * (fault_s - 1.0 - force_t.min())
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -111,25 +112,26 @@ def test_smc100_replies_of_random_bytes_raise_only_device_errors(data):
 # What a Loadstar answers while the driver opens it (tests/drivers/test_loadstar_protocol.py, from the manual).
 VALID_OPEN = {"di1000": [b"A\r\n", b"A\r\n", b"LB\r\n", b"10.000\r\n"],
               "iload": [b"A\r\n", b"A\r\n", b"10.000\r\n"]}
-OPENED = {"count": 0}
 
 
-# derandomized: the examples are the same on every run and every machine, so the count the next test checks is
-# too (with random examples and no example database, as in a fresh clone, it came out 9 once)
-@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True,
+# Half the examples open properly and then talk noise, so every run reaches the read, tare and stream parsers: a
+# valid opening is a parameter, not a random draw (drawn, how many examples opened depended on the examples, which
+# hypothesis derives from this function's source: an edit elsewhere in it once left 8 of 80).
+@pytest.mark.parametrize("opening", ["valid", "noise"])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True,
           database=None)
 @given(data=st.data(), command_set=st.sampled_from(["di1000", "iload"]))
-def test_loadstar_replies_and_stream_of_random_bytes_raise_only_device_errors(data, command_set):
+def test_loadstar_replies_and_stream_of_random_bytes_raise_only_device_errors(data, command_set, opening):
     clock = VirtualClock()
     chunks = [data.draw(reply_like(b"")) for _ in range(14)]
-    if data.draw(st.booleans()):  # a sensor that opens properly, then talks noise (the read and stream parsers)
+    if opening == "valid":  # a sensor that opens properly, then talks noise (the read and stream parsers)
         chunks = VALID_OPEN[command_set] + chunks
     port = NoisePort(chunks, clock)
     sensor = call(lambda: LoadstarSensor("fuzz://", clock, command_set=command_set, timeout_s=0.05,
-                                         tare_timeout_s=0.1, port_opener=port.open_for))
+                                         tare_readings=2, port_opener=port.open_for))
     if sensor is None:  # opening read noise instead of units / capacity: refused with a DeviceError
+        assert opening == "noise", "a sensor that answered the opening properly was refused"
         return
-    OPENED["count"] += 1
     assert math.isfinite(sensor.capacity_N) and sensor.capacity_N > 0
     value = call(sensor.read_N)
     assert value is None or (isinstance(value, float) and math.isfinite(value))
@@ -144,7 +146,3 @@ def test_loadstar_replies_and_stream_of_random_bytes_raise_only_device_errors(da
     call(sensor.stop_stream)
     call(sensor.close)
 
-
-def test_the_fuzzed_loadstar_opened_often_enough_to_reach_the_read_parsers():
-    # runs after the property above (file order): its examples with a valid opening got past open()
-    assert OPENED["count"] >= 10, OPENED
