@@ -104,9 +104,11 @@ def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_
     # A stream reaches the client only after it has subscribed to it, and whole frames at most a few times per WALL
     # second; a simulated run is ~10x faster than real time, so on a loaded machine the camera steps (four
     # repetitions, ~5 s wall) can end before the subscriptions arrive. Such a run is watched again, up to three times.
+    attempts = []  # per attempt, what reached the client by topic (said if the last attempt fails too)
     for attempt in range(3):
         run, client, code, err, ended_ns = _watch(tmp_path / f"fd{attempt}.mcap")
         reached = {m.topic for m in client.received}
+        attempts.append(dict(sorted(client.counts.items())) | {"errors": client.errors})
         if code != 0 or all(t in reached for t, i in RecordingReader(run.out).topics().items() if i.message_count):
             break
     assert code == 0, err
@@ -126,7 +128,7 @@ def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_
         assert (channel.encoding, channel.schema_name, channel.schema) == ("protobuf", stored.name, stored.data)
         assert channel.metadata == reader._by_topic[topic].metadata
         got = by_topic.get(topic, [])
-        assert got, f"no message of {topic} reached the client"
+        assert got, f"no message of {topic} reached the client; by attempt, what did: {attempts}"
         cls = schemas.message_class(stored.name, stored.data)
         for message in got[:50]:
             cls.FromString(message.payload)  # decodes with the file's own schema
