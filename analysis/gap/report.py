@@ -12,6 +12,21 @@ import numpy as np
 from analysis.gap.results import best_text, closed_share_text
 
 
+def specimen_label(group: str) -> str:
+    """A specimen group's key (`layers=2|specimen=B`) as a table cell: `2 layers, specimen B`, or `2 layers` for a
+    recording that names no specimen ('|' escaped: it would split the cell)."""
+    parts: dict[str, str] = {}
+    for item in group.split("|"):
+        key, _, value = item.partition("=")
+        parts[key] = value
+    layers, specimen = parts.get("layers", ""), parts.get("specimen", "")
+    if not layers or set(parts) - {"layers", "specimen"}:
+        label = group
+    else:
+        label = f"{layers} layer{'' if layers == '1' else 's'}" + (f", specimen {specimen}" if specimen else "")
+    return label.replace("|", "\\|")
+
+
 def _group_label(problem, i: int) -> str:
     r = problem.rows[i]
     run = problem.data.runs[r.run]
@@ -208,7 +223,7 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     lines += ["| specimen | free stroke vs preset | stiffness vs preset | tolerance sigmas |"
               + (" plate thickness (fitted with d31(E)) |" if plates else ""), "|---|---|---|---|" + "---|" * plates]
     for g, v in result["specimens"].items():
-        label = g.replace("|", "\\|")      # a group key holds '|', which would split the table's cell
+        label = specimen_label(g)
         lines.append(f"| {label} | {v['stroke_change']:+.1%} | {v['stiffness_change']:+.1%} | "
                      f"{v['tolerance_sigmas']:.2f} |" + (f" {v['plate_thickness_change']:+.1%} |" if plates else ""))
     lines += ["", "A fabrication shift common to a layer count's specimens shows from these sizes on (smaller ones "
