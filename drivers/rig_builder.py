@@ -69,7 +69,7 @@ def build_force_sensor(rig_file: RigFile, table: str, t: LoadstarTable | Nano17T
 
         return LoadstarSensor(_port(rig_file, table, ports.get("force_sensor"), t.port), clock,
                               command_set=t.command_set, baudrate=t.baudrate, timeout_s=t.timeout_s,
-                              stream_rate_Hz=t.stream_rate_Hz,
+                              stream_rate_Hz=t.stream_rate_Hz, tare_readings=t.tare_readings,
                               port_opener=_serial_opener("force_sensor", clock, traffic))
     from drivers.ati_nano17 import AtiNano17
 

@@ -72,6 +72,7 @@ class LoadstarTable:
     baudrate: int = setting(9600, lo=1)
     timeout_s: float = setting(0.5, positive=True)
     stream_rate_Hz: float = setting(150.0, positive=True)
+    tare_readings: int = setting(16, lo=1)   # single readings a tare averages (the driver keeps the zero)
     daq_device: str | None = None  # accepted for symmetry with nano17; unused
 
 

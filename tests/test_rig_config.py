@@ -75,3 +75,8 @@ def test_non_positive_baudrate_names_the_place(tmp_path):
     """Found by the mutated-rig property test: baudrate = 0 used to end in a ZeroDivisionError traceback."""
     with pytest.raises(ConfigError, match=r"\[force_sensor\] baudrate: expected at least 1, got 0"):
         load_rig(rig_with(tmp_path, "baudrate = 9600", "baudrate = 0"))
+
+
+def test_a_loadstar_tare_of_no_readings_names_the_place(tmp_path):
+    with pytest.raises(ConfigError, match=r"\[force_sensor\] tare_readings: expected at least 1, got 0"):
+        load_rig(rig_with(tmp_path, "baudrate = 9600", "baudrate = 9600\ntare_readings = 0"))
