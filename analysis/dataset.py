@@ -34,9 +34,10 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from analysis.sessions import session_key
-from hamr_bench.errors import ConfigError, HamrBenchError
+from hamr_bench.errors import HamrBenchError
 from hamr_bench.recording.contract import EventKind, Topic
 from hamr_bench.recording.drive_timing import Cycle, infer_cycles
+from hamr_bench.recording.files import recording_files
 from hamr_bench.recording.run_metadata import RunMetadata
 from hamr_bench.recording.steps import StepRecord, open_reader, parse_run, sorted_stream
 
@@ -305,15 +306,7 @@ def load_run(path: Path | str, index: int = 0) -> Run:
 
 def load_dataset(paths: Iterable[Path | str], skip_failed: bool = False) -> Dataset:
     """Read recordings (files, or directories searched for *.mcap) into one Dataset."""
-    files: list[Path] = []
-    for p in paths:
-        p = Path(p)
-        if p.is_dir():
-            files.extend(sorted(p.glob("*.mcap")))
-        else:
-            files.append(p)
-    if not files:
-        raise ConfigError("no recordings given (expected .mcap files or directories holding them)")
+    files = recording_files(paths)
     runs: list[Run] = []
     for f in files:
         try:

@@ -46,9 +46,10 @@ import numpy as np
 from analysis.gap.history import history_notes, segments_of, share_specimen_history
 from analysis.gap.moderation import squeeze
 from analysis.sessions import session_key
-from hamr_bench.errors import ConfigError, RecordingError
+from hamr_bench.errors import RecordingError
 from hamr_bench.recording.contract import EventKind, Topic
 from hamr_bench.recording.drive_timing import Cycle
+from hamr_bench.recording.files import recording_files
 from hamr_bench.recording.steps import (Block, DriveTiming, ParsedRun, StepRecord, Timelines, open_reader,
                                         parse_run, sorted_stream)
 
@@ -423,12 +424,7 @@ def load_gap_data(paths: Iterable[Path | str], jobs: int | None = 1, scheduler: 
     """Read recordings (files, or directories searched for *.mcap); `jobs` local processes or a Dask `scheduler`
     read them in parallel (analysis.parallel; jobs=1 reads in this process). Runs are numbered in file order,
     each file's specimen blocks in time order."""
-    files: list[Path] = []
-    for p in paths:
-        p = Path(p)
-        files.extend(sorted(p.glob("*.mcap")) if p.is_dir() else [p])
-    if not files:
-        raise ConfigError("no recordings given (expected .mcap files or directories holding them)")
+    files = recording_files(paths)
     if jobs == 1 and scheduler is None:
         per_file = [load_runs(f, 0) for f in files]
     else:

@@ -16,6 +16,7 @@ high dwell (blocked force F_b, free stroke delta; the stroke from low to high is
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,8 +134,11 @@ def _monitor(v: np.ndarray, lab: Lab, rng: np.random.Generator) -> np.ndarray:
 
 def specimen_rows(sp: Specimen, layers: int, test: str, v_bias: float, lab: Lab, effects: Effects,
                   rng: np.random.Generator, t0: float = 0.0, force_offset_N: float = 0.0,
-                  start_phase_s: float = 0.0) -> list[dict[str, object]]:
-    """One specimen's rows of one test ('blocked' or 'free') at one V_bias."""
+                  start_phase_s: float = 0.0,
+                  baseline_N: Callable[[np.ndarray], np.ndarray] | None = None) -> list[dict[str, object]]:
+    """One specimen's rows of one test ('blocked' or 'free') at one V_bias. `baseline_N`: the force sensor's own
+    baseline at the logger's times (t0 + t), read under every sample: then the sensor reads the push of the tip
+    (none off it), its baseline and its noise, where without one its noisy reading is clipped at 0."""
     t, vd = drive(v_bias, lab, start_phase_s)
     u = 2.0 * vd - v_bias                      # net drive: -V_bias at rest, +V_bias in the high dwell
     y = _creep(t, _duhem(u, effects.hysteresis * v_bias), effects.creep)
@@ -144,9 +148,13 @@ def specimen_rows(sp: Specimen, layers: int, test: str, v_bias: float, lab: Lab,
     if test == "blocked":
         ts = t - lab.sensor_lag_s
         f = np.interp(ts, t, c * y) + force_offset_N
-        f = f + rng.normal(0.0, lab.force_noise_N, t.size)
-        if lab.push_only:
-            f = np.maximum(f, 0.0)
+        if baseline_N is not None:
+            f = np.maximum(f, 0.0) if lab.push_only else f
+            f = f + baseline_N(t0 + t) + rng.normal(0.0, lab.force_noise_N, t.size)
+        else:
+            f = f + rng.normal(0.0, lab.force_noise_N, t.size)
+            if lab.push_only:
+                f = np.maximum(f, 0.0)
         for ti, vi, fi in zip(t, mon, f, strict=True):
             rows.append({"time_s": t0 + ti, "voltage_V": vi, "force_N": fi, "displacement_m": "",
                          "stage_position_m": "", "specimen": sp.label})

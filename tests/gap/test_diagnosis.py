@@ -28,13 +28,16 @@ def write_lab(directory, effects: Effects, seed: int, volts=(120.0, 250.0), lab:
             f = LabFile()
             for sp in specimens:
                 f.rows += specimen_rows(sp, 2, test, v, lab, effects, rng)
-            csv_path = directory / f"{test}_{int(v)}V.csv"
-            f.write(csv_path)
-            mcap = csv_path.with_suffix(".mcap")
-            assert main(["import", "trace", str(csv_path), "--protocol", "actuator", "--layers", "2",
-                         "--out", str(mcap)]) == 0
-            out.append(mcap)
+            out.append(import_lab_file(f, directory / f"{test}_{int(v)}V.csv"))
     return out
+
+
+def import_lab_file(f: LabFile, csv_path) -> object:
+    """Write one of the lab's CSVs (2-layer actuators) and import it as a user would; the recording's path."""
+    f.write(csv_path)
+    mcap = csv_path.with_suffix(".mcap")
+    assert main(["import", "trace", str(csv_path), "--protocol", "actuator", "--layers", "2", "--out", str(mcap)]) == 0
+    return mcap
 
 
 @pytest.fixture(scope="module")
