@@ -144,6 +144,10 @@ def _in_ambiguous_set(t: Trial, name: str) -> bool:
     return any(name in s for s in t.ambiguous_sets) or t.named.get(name) == "ambiguous"
 
 
+def _covers(t: Trial, name: str) -> bool:
+    return t.strength_ci95[name][0] <= float(t.truth_strength[name] or 0.0) <= t.strength_ci95[name][1]
+
+
 def score(trials: list[Trial]) -> dict[str, Any]:
     """The issue's bars, each as a measured fraction with the number of trials it rests on."""
     single = [t for t in trials if t.kind == "single"]
@@ -157,12 +161,21 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     multi_pairs = [(t, n) for t in multi for n in t.truth]
     coverage = [(t, n) for t in trials for n in t.truth
                 if t.truth_strength.get(n) is not None and n in _attributed(t) and n in t.strength_ci95]
-    covered = [(t, n) for t, n in coverage
-               if t.strength_ci95[n][0] <= float(t.truth_strength[n] or 0.0) <= t.strength_ci95[n][1]]
+    covered = [(t, n) for t, n in coverage if _covers(t, n)]
     by_effect: dict[str, list[int]] = {}
     for t in single:
         row = by_effect.setdefault(t.truth[0], [0, 0])
         row[0] += t.best == t.truth[0]
+        row[1] += 1
+    multi_by_effect: dict[str, list[int]] = {}
+    for t, n in multi_pairs:
+        row = multi_by_effect.setdefault(n, [0, 0])
+        row[0] += n in t.named and t.named[n] in ("attributed", "ambiguous")
+        row[1] += 1
+    coverage_by_effect: dict[str, list[int]] = {}
+    for t, n in coverage:
+        row = coverage_by_effect.setdefault(n, [0, 0])
+        row[0] += _covers(t, n)
         row[1] += 1
     return {
         "trials": len(trials), "single_trials": len(single), "multi_trials": len(multi),
@@ -174,6 +187,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "multi_effects_named": frac(sum(n in t.named and t.named[n] in ("attributed", "ambiguous")
                                         for t, n in multi_pairs), len(multi_pairs)),
         "multi_effect_count": len(multi_pairs),
+        "multi_effects_named_by_effect": multi_by_effect,
         # the looser reading: a hidden effect inside a set the diagnosis names as one it cannot separate
         "multi_effects_named_or_in_set": frac(sum((n in t.named and t.named[n] in ("attributed", "ambiguous"))
                                                   or _in_ambiguous_set(t, n) for t, n in multi_pairs),
@@ -181,6 +195,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "false_attribution_rate_null": frac(sum(_answered(t) for t in nulls), len(nulls)),
         "decoys_unexplained": frac(sum(not _answered(t) for t in decoy_only), len(decoy_only)),
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),
+        "interval_coverage_by_effect": coverage_by_effect,
         "mean_sim_s": float(np.mean([t.sim_s for t in trials])) if trials else None,
         "mean_diagnose_s": float(np.mean([t.diagnose_s for t in trials])) if trials else None,
         "trials_with_a_joint_entry": sum(bool(t.joint) for t in trials),

@@ -10,6 +10,22 @@ def _trial(kind, truth, best=None, named=None, sets=None, decoys=()):
                  best=best, named=dict(named or {}), ambiguous_sets=[list(s) for s in (sets or [])])
 
 
+def test_multi_effect_names_and_coverage_are_also_counted_per_effect():
+    trials = [_trial("multi", ["creep", "width_loss"], best="creep", named={"creep": "attributed"}),
+              _trial("multi", ["creep", "hysteresis"], best="hysteresis",
+                     named={"hysteresis": "attributed", "creep": "unexplained"})]
+    trials[0].truth_strength["creep"] = 0.02
+    trials[0].strength_ci95["creep"] = (0.025, 0.03)        # attributed, its interval above the truth
+    trials[1].truth_strength["hysteresis"] = 0.1
+    trials[1].strength_ci95["hysteresis"] = (0.08, 0.12)
+    trials[1].truth_strength["creep"] = 0.01
+    trials[1].strength_ci95["creep"] = (0.0, 0.02)          # covers, but named `unexplained`: not counted
+    s = score(trials)
+    assert s["multi_effects_named_by_effect"] == {"creep": [1, 2], "width_loss": [0, 1], "hysteresis": [1, 1]}
+    assert s["interval_coverage_by_effect"] == {"creep": [0, 1], "hysteresis": [1, 1]}
+    assert s["interval_coverage"] == pytest.approx(0.5)
+
+
 def test_a_set_member_counts_only_in_the_looser_multi_effect_figure():
     trials = [_trial("multi", ["creep", "width_loss"], best="creep", named={"creep": "attributed",
                                                                            "pzt_modulus": "ambiguous"},
