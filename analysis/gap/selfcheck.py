@@ -144,6 +144,11 @@ def _in_ambiguous_set(t: Trial, name: str) -> bool:
     return any(name in s for s in t.ambiguous_sets) or t.named.get(name) == "ambiguous"
 
 
+def _named_at_a_step(t: Trial, name: str) -> bool:
+    """Named at a waterfall step, attributed or ambiguous (the multi-effect figure's count)."""
+    return t.named.get(name) in ("attributed", "ambiguous")
+
+
 def _covers(t: Trial, name: str) -> bool:
     return t.strength_ci95[name][0] <= float(t.truth_strength[name] or 0.0) <= t.strength_ci95[name][1]
 
@@ -170,7 +175,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
     multi_by_effect: dict[str, list[int]] = {}
     for t, n in multi_pairs:
         row = multi_by_effect.setdefault(n, [0, 0])
-        row[0] += n in t.named and t.named[n] in ("attributed", "ambiguous")
+        row[0] += _named_at_a_step(t, n)
         row[1] += 1
     coverage_by_effect: dict[str, list[int]] = {}
     for t, n in coverage:
@@ -184,13 +189,12 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         "top1_single_by_effect": by_effect,
         "truth_in_ambiguous_set_single": frac(sum(t.best != t.truth[0] and _in_ambiguous_set(t, t.truth[0])
                                                   for t in single), len(single)),
-        "multi_effects_named": frac(sum(n in t.named and t.named[n] in ("attributed", "ambiguous")
-                                        for t, n in multi_pairs), len(multi_pairs)),
+        "multi_effects_named": frac(sum(_named_at_a_step(t, n) for t, n in multi_pairs), len(multi_pairs)),
         "multi_effect_count": len(multi_pairs),
         "multi_effects_named_by_effect": multi_by_effect,
         # the looser reading: a hidden effect inside a set the diagnosis names as one it cannot separate
-        "multi_effects_named_or_in_set": frac(sum((n in t.named and t.named[n] in ("attributed", "ambiguous"))
-                                                  or _in_ambiguous_set(t, n) for t, n in multi_pairs),
+        "multi_effects_named_or_in_set": frac(sum(_named_at_a_step(t, n) or _in_ambiguous_set(t, n)
+                                                  for t, n in multi_pairs),
                                               len(multi_pairs)),
         "false_attribution_rate_null": frac(sum(_answered(t) for t in nulls), len(nulls)),
         "decoys_unexplained": frac(sum(not _answered(t) for t in decoy_only), len(decoy_only)),
@@ -299,7 +303,7 @@ def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, de
         for n in t.truth[:1] if t.kind == "single" else t.truth:
             sig = sigmas.get(n)
             key = "other" if sig is None else ("gain_above_limit" if sig >= DETECTION_SIGMAS else "gain_below_limit")
-            named = n in t.named and t.named[n] in ("attributed", "ambiguous")
+            named = _named_at_a_step(t, n)
             row = single[key] if t.kind == "single" else multi[key]
             row[0] += t.best == n if t.kind == "single" else named
             row[1] += (t.best != n if t.kind == "single" else not named) and _in_ambiguous_set(t, n)

@@ -29,5 +29,5 @@ def recording_files(paths: Iterable[Path | str]) -> list[Path]:
     if below:
         shown = ", ".join(str(b) for b in below[:3]) + (f" and {len(below) - 3} more" if len(below) > 3 else "")
         raise ConfigError(f"no .mcap recordings directly in {', '.join(str(d) for d in empty_dirs)}; "
-                          f"directories below it hold some: {shown} (give those)")
+                          f"directories below hold some: {shown} (give those)")
     raise ConfigError("no recordings given (expected .mcap files or directories holding them)")

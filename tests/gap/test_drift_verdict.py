@@ -13,7 +13,7 @@ import pytest
 
 from analysis.gap.diagnose import diagnose, nominal_fit
 from analysis.gap.features import load_gap_data
-from analysis.gap.heldout import Judge
+from analysis.gap.heldout import Judge, rms
 from analysis.gap.problem import Problem
 from analysis.gap.verdict import baseline_closure
 from tests.analysis.lab_traces import Effects, Lab, LabFile, specimen_rows
@@ -66,9 +66,6 @@ def test_a_drift_is_judged_with_each_left_out_specimens_own_baseline_known(drift
     n = p.y.size
     force = np.concatenate([e.is_force_row for e in p.engines])
     z0, z1 = judge.z(nominal), judge.z(drift)
-
-    def rms(v):
-        return float(np.sqrt(np.mean(v * v)))
 
     # a left-out specimen's force rows: its baseline predicted at 0 by both models, no better with the drift
     assert rms(z1[n:][force]) > 0.95 * rms(z0[n:][force])
