@@ -10,7 +10,7 @@ import json
 import os
 from pathlib import Path
 
-from analysis.gap.results import best_text, closed_share_text
+from analysis.gap.results import best_text, closed_share_text, floor_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -80,8 +80,7 @@ def format_text(result: dict) -> str:
         lines += ["", "tried next, none passing:"]
         lines += [f"  {c['effect']:22s} {c['why']}" for c in result["turned_down"]]
     rest = result["unexplained"]
-    lines += ["", f"left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise"
-              + (" (at the noise floor)" if rest["at_noise_floor"] else ""),
+    lines += ["", f"left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise" + floor_text(rest),
               f"best: {best_text(result)}"]
     return "\n".join(lines)
 

@@ -23,7 +23,7 @@ from analysis.gap.features import GapData
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import WIDE_GAIN_BOUND, Fit, Problem
 from analysis.gap.ranking import select
-from analysis.gap.results import Diagnosis
+from analysis.gap.results import Diagnosis, Remainder
 from analysis.gap.screening import screen
 from analysis.gap.verdict import decide
 from hamr_bench.errors import ModelError
@@ -160,10 +160,8 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     named, best, cannot = decide(p, sel, judge)
     final = sel.fits[-1]
     last = sel.steps[-1]
-    unexplained = {"heldout_rms": last.heldout.rms, "heldout_rms_ci95": list(last.heldout.ci95),
-                   "at_noise_floor": bool(last.heldout.ci95[0] <= 1.0),
-                   "lack_of_fit_p": res.global_test(p, final.z, len(final.layout.params))["p_value"],
-                   "closed_fraction": last.closed_fraction}
+    unexplained = Remainder(last.heldout.rms, (float(last.heldout.ci95[0]), float(last.heldout.ci95[1])),
+                            res.global_test(p, final.z, len(final.layout.params))["p_value"], last.closed_fraction)
     lags = {"/".join(q.key): final.value("lag", *q.key) for q in final.layout.params if q.kind == "lag"}
     diag = Diagnosis(where=where, gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
                      specimens=specimen_table(p, nominal, final), screening=screened, waterfall=sel.steps, named=named,
@@ -171,6 +169,6 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
                      specimen_population=population, detection_limits=detection_limits(p),
-                     turned_down=sel.rejected)
+                     turned_down=sel.rejected, candidates=list(names))
     diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
     return diag

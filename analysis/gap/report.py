@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.gap.results import best_text, closed_share_text
+from analysis.gap.results import best_text, closed_share_text, floor_text
 
 
 def specimen_label(group: str) -> str:
@@ -217,7 +217,7 @@ def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     rest = result["unexplained"]
     lines += ["", f"Left unexplained: held-out RMS {rest['heldout_rms']:.2f} x noise "
               f"[{rest['heldout_rms_ci95'][0]:.2f}, {rest['heldout_rms_ci95'][1]:.2f}]"
-              + (" (at the noise floor)." if rest["at_noise_floor"] else "."),
+              + floor_text(rest) + ".",
               "", f"**Best: {best_text(result)}**", "", "## Specimens", ""]
     plates = any("plate_thickness_change" in v for v in result["specimens"].values())
     lines += ["| specimen | free stroke vs preset | stiffness vs preset | tolerance sigmas |"

@@ -116,6 +116,39 @@ class NamedEffect:
                 "beyond_tolerance": self.beyond_tolerance, "explains_gap": self.explains, "notes": list(self.notes)}
 
 
+@dataclass(frozen=True)
+class Remainder:
+    """What the named effects leave: the last step's held-out gap (noise units) with its bootstrap interval,
+    whether that interval reaches the noise floor, the final fit's in-sample lack-of-fit p, and the share of the
+    nominal held-out gap above the floor closed."""
+
+    heldout_rms: float
+    heldout_rms_ci95: tuple[float, float]
+    lack_of_fit_p: float
+    closed_fraction: float
+
+    @property
+    def at_noise_floor(self) -> bool:
+        return bool(self.heldout_rms_ci95[0] <= 1.0)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"heldout_rms": self.heldout_rms, "heldout_rms_ci95": list(self.heldout_rms_ci95),
+                "at_noise_floor": self.at_noise_floor, "lack_of_fit_p": self.lack_of_fit_p,
+                "closed_fraction": self.closed_fraction}
+
+
+@dataclass(frozen=True)
+class AmbiguousSet:
+    """Explanations the data fitted as well as each other (or an effect and a sensor's timing lag), each with the
+    measurement that would tell it from the others."""
+
+    effects: tuple[str, ...]
+    separated_by: dict[str, str]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"effects": list(self.effects), "separated_by": dict(self.separated_by)}
+
+
 @dataclass
 class Diagnosis:
     """Everything `diagnose` finds: where the gap is, what explains how much of it, what the data cannot tell."""
@@ -128,8 +161,8 @@ class Diagnosis:
     waterfall: list[WaterfallStep]
     named: list[NamedEffect]
     best: str | None
-    unexplained: dict[str, Any]
-    cannot_separate: list[dict[str, Any]]
+    unexplained: Remainder
+    cannot_separate: list[AmbiguousSet]
     sensor_lag_s: dict[str, float]
     ramp_rates_s: list[float]
     elapsed_s: float
@@ -139,6 +172,9 @@ class Diagnosis:
     fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
     # the candidates the step after the last named effect tried, none passing (why the selection stopped there)
     turned_down: list[StepCandidate] = field(default_factory=list)
+    # every candidate this data can show at all (`diagnose.applicable`), screened or not: with no gap above the
+    # noise nothing is screened, and the ranking is empty although these were in the library
+    candidates: list[str] = field(default_factory=list)
 
     def ranking(self) -> list[dict[str, Any]]:
         """Named effects first (waterfall order), each ambiguous one followed by the others of its set (the
@@ -168,15 +204,15 @@ class Diagnosis:
 
     def to_json(self) -> dict[str, Any]:
         return {"best": self.best, "ranking": self.ranking(), "named": [e.to_json() for e in self.named],
-                "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained,
-                "cannot_separate": self.cannot_separate, "where": self.where,
+                "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained.to_json(),
+                "cannot_separate": [c.to_json() for c in self.cannot_separate], "where": self.where,
                 "gap_above_noise": self.gap_above_noise, "nominal_lack_of_fit": self.nominal_lack_of_fit,
                 "specimen_population": self.specimen_population, "detection_limits": self.detection_limits,
                 "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
                 "heldout_units": "noise units (z = held-out residual / pure-error standard error / the nominal "
                                  "fit's predictive spread there, the same for every model); 1 = the noise floor",
-                "recordings": self.recordings, "elapsed_s": self.elapsed_s,
+                "recordings": self.recordings, "elapsed_s": self.elapsed_s, "candidates": list(self.candidates),
                 "turned_down": [{**c.to_json(), "bar_chi2": c.bar, "why": c.why_not()} for c in self.turned_down]}
 
 
@@ -214,3 +250,14 @@ def closed_share_text(fraction: float | None, of: str = "") -> str:
     if fraction >= 1.0:
         return f"all{of}, to below the noise floor"
     return f"{fraction:.0%}{of}"
+
+
+def floor_text(rest: dict) -> str:
+    """Where the held-out remainder stands against the noise floor, in words: its interval can reach 1 while the
+    figure itself stands well above it (few conditions held out give a wide interval)."""
+    if not rest["at_noise_floor"]:
+        return ""
+    lo, hi = rest["heldout_rms_ci95"]
+    if rest["heldout_rms"] <= 1.0:
+        return " (at the noise floor)"
+    return f" (its 95 % interval, {lo:.2f}-{hi:.2f}, reaches the noise floor)"

@@ -115,7 +115,7 @@ def run_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.
         decoys=[e.name for e in sc.effects if e.decoy],
         truth_strength={str(e.library_name): e.library_strength for e in library},
         best=result.best, named={e.name: e.verdict for e in result.named},
-        ambiguous_sets=[list(s["effects"]) for s in result.cannot_separate],
+        ambiguous_sets=[list(s.effects) for s in result.cannot_separate],
         strength_ci95={e.name: [float(x) for x in e.strength_ci95] for e in result.named},
         sim_s=t1 - t0, diagnose_s=t2 - t1, joint=joint_pairs(result.waterfall))
 

@@ -29,7 +29,7 @@ from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge, rms
 from analysis.gap.problem import Fit, Problem
 from analysis.gap.ranking import Selection, strength_estimate
-from analysis.gap.results import NamedEffect
+from analysis.gap.results import AmbiguousSet, NamedEffect
 
 CLOSED_MIN = 0.5
 REFIT_NFEV = 40          # the real effects refitted without the others (`real_closure`), as a selection step's fits
@@ -169,13 +169,13 @@ def baseline_closure(p: Problem, nominal: Fit, fit: Fit, judge: Judge) -> float:
     return min((before - rms(z1)) / (before - 1.0), 1.0) if before > 1.0 else 0.0    # at most all of it
 
 
-def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect], str | None, list[dict]]:
+def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect], str | None, list[AmbiguousSet]]:
     final = sel.fits[-1]
     rms0 = sel.steps[0].heldout.rms
     estimates = {s.added: strength_estimate(p, final, s.added, judge) for s in sel.steps[1:] if s.added}
     total_closed, gap_read = real_closure(p, sel, estimates, judge)
     named: list[NamedEffect] = []
-    cannot: list[dict] = []
+    cannot: list[AmbiguousSet] = []
     for k, step in enumerate(sel.steps[1:], start=1):
         name = step.added
         assert name is not None
@@ -205,7 +205,7 @@ def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect],
         verdict = "ambiguous" if ambiguous else settled
         if ambiguous:
             members = [name] + ambiguous
-            cannot.append({"effects": members, "separated_by": {m: SEPARATED_BY.get(m, "") for m in members}})
+            cannot.append(AmbiguousSet(tuple(members), {m: SEPARATED_BY.get(m, "") for m in members}))
         named.append(NamedEffect(
             name=name, verdict=verdict, strength=float(strength), strength_ci95=(float(ci[0]), float(ci[1])),
             shapes=dict(value.shapes), heldout_before=before, heldout_after=after,

@@ -34,8 +34,9 @@ ROOT = Path(__file__).resolve().parents[2]
 # effect. Main's names (analysis/gap/library.py CANDIDATES) and the names the issue-16 diagnosis adds
 # (grounding_lengthening, pzt_thickness, pzt_modulus). A longer active length and a
 # compliant clamp are one observable, an effective length (the paper: "effective length to be greater due to
-# imperfect mechanical grounding"), so both map to it. A name counts as "in the library" for a case when it
-# appears in that case's ranking.
+# imperfect mechanical grounding"), so both map to it. A name counts as "in the library" for a case when the
+# diagnosis lists it among the `candidates` the data can show (whether or not a gap was found); a checkout whose
+# JSON has no `candidates` is read from the ranking, which is empty where no gap was found.
 CANDIDATE_NAMES: dict[str, tuple[str, ...]] = {
     "hysteresis": ("hysteresis",),
     "creep": ("creep",),
@@ -64,7 +65,7 @@ class CaseResult:
     best: str | None = None
     verdict: str = ""                                 # the top-ranked entry's verdict
     ambiguous_set: list[str] = field(default_factory=list)
-    library: list[str] = field(default_factory=list)  # candidate names in this case's ranking
+    library: list[str] = field(default_factory=list)  # the candidates the diagnosis could name in this case
     refused: str = ""                                 # hamr-bench's one-line reason, "" if it answered
     refused_files: list[str] = field(default_factory=list)
     outcome: str = ""
@@ -146,7 +147,9 @@ def read_answer(result: CaseResult, out: dict[str, Any]) -> None:
     ranking = [e for e in out.get("ranking") or [] if isinstance(e, dict)]
     result.best = out.get("best") if isinstance(out.get("best"), str) else None
     result.named = named_effects(out)
-    result.library = sorted({n for e in ranking for n in str(e.get("effect", "")).split("+") if n})
+    candidates = out.get("candidates")
+    result.library = sorted(str(n) for n in candidates) if isinstance(candidates, list) else \
+        sorted({n for e in ranking for n in str(e.get("effect", "")).split("+") if n})   # a checkout before them
     entries = _entries(out)
     if entries:
         result.verdict = str(entries[0].get("verdict", ""))

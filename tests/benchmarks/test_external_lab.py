@@ -204,3 +204,20 @@ def test_the_scorer_reads_names_pairs_and_refusals():
     figures = score.summary([r, null, single, refused])
     assert figures["refused"] == 1 and figures["multi_effects_named"] == [2, 2]
     assert figures["single_top1"] == [1, 1] and figures["null_false_attributions"] == [0, 1]
+
+
+def test_the_scorer_counts_an_effect_the_diagnosis_found_no_gap_for_as_missed():
+    """With no gap above the noise the ranking is empty; the case's effect was still in the library (the gap JSON's
+    `candidates`), so it is a miss, not a case without a candidate."""
+    no_gap = {"best": None, "named": [], "ranking": [], "candidates": ["creep", "grounding_lengthening"]}
+    single = score.CaseResult("s", "single", ["length"])
+    score.read_answer(single, no_gap)
+    assert score.judge(single) == "missed"
+    multi = score.CaseResult("m", "multi", ["grounding", "creep"])
+    score.read_answer(multi, no_gap)
+    assert score.judge(multi) == "named 0/2"
+    figures = score.summary([single, multi])
+    assert figures["single_top1"] == [0, 1] and figures["multi_effects_named"] == [0, 2]
+    older = score.CaseResult("o", "single", ["length"])      # a checkout whose JSON has no `candidates`
+    score.read_answer(older, {"best": None, "named": [], "ranking": []})
+    assert score.judge(older).startswith("no-candidate")

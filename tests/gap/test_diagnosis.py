@@ -83,6 +83,9 @@ def test_a_null_stays_null_on_another_labs_data(null_lab):
     assert all(e.verdict != "attributed" for e in d.named)
     # specimens are fitted within their tolerances, not reported as effects
     assert set(d.specimens) == {"layers=2|specimen=A", "layers=2|specimen=B", "layers=2|specimen=C"}
+    # what it could have named, whether or not a gap was found: actuator effects, no leg or stage effect
+    assert {"hysteresis", "creep", "width_loss", "sensor_drift"} <= set(d.candidates)
+    assert not {"bias_error", "stage_backlash"} & set(d.candidates)
 
 
 @pytest.mark.slow
@@ -95,6 +98,7 @@ def test_gap_cli_json_and_report(null_lab, tmp_path, capsys):
                         "specimens", "recordings"}
     assert out["waterfall"][0]["added"] is None and out["waterfall"][0]["heldout_rms"] > 0
     assert {e["effect"] for e in out["ranking"]} == {"hysteresis", "creep"}
+    assert out["candidates"] == ["hysteresis", "creep"]
     assert (tmp_path / "rep" / "waterfall.png").stat().st_size > 0
     assert "## Which" in (tmp_path / "rep" / "gap.md").read_text()
 

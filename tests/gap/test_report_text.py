@@ -1,6 +1,6 @@
 """How the gap's text output and report word a step's share of the held-out gap."""
 
-from analysis.gap.results import closed_share_text
+from analysis.gap.results import closed_share_text, floor_text
 
 
 def test_a_step_that_takes_the_gap_below_the_noise_floor_reads_as_all_of_it():
@@ -9,6 +9,14 @@ def test_a_step_that_takes_the_gap_below_the_noise_floor_reads_as_all_of_it():
     assert closed_share_text(1.0) == "all, to below the noise floor"
     assert closed_share_text(0.524, " of the held-out gap") == "52% of the held-out gap"
     assert closed_share_text(None) == "-"
+
+
+def test_a_remainder_whose_interval_reaches_the_floor_is_not_called_at_it():
+    # external-lab case 4509: 4.40 x noise, interval 0.96-7.41 from few held-out conditions
+    wide = {"heldout_rms": 4.40, "heldout_rms_ci95": [0.96, 7.41], "at_noise_floor": True}
+    assert floor_text(wide) == " (its 95 % interval, 0.96-7.41, reaches the noise floor)"
+    assert floor_text({**wide, "heldout_rms": 0.98}) == " (at the noise floor)"
+    assert floor_text({**wide, "heldout_rms_ci95": [1.4, 7.41], "at_noise_floor": False}) == ""
 
 
 def test_each_named_effects_notes_reach_the_terminal_text():

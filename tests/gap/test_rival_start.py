@@ -68,4 +68,4 @@ def test_the_rival_named_after_the_lead_is_fitted_out_of_the_leads_basin(hystere
                                                                                    from_lead.objective)
     hyst = next(e for e in r.named if e.name == "hysteresis")
     assert hyst.verdict == "attributed"
-    assert r.unexplained["at_noise_floor"]
+    assert r.unexplained.at_noise_floor
