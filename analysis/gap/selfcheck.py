@@ -134,6 +134,12 @@ def _attributed(t: Trial) -> set[str]:
     return {n for n, v in t.named.items() if v == "attributed"}
 
 
+def _extra_attributions(t: Trial) -> set[str]:
+    """Effects attributed (or `best`) that the trial does not hold: on a single- or multi-effect trial, what a null's
+    false attribution is on a null."""
+    return (_attributed(t) | ({t.best} if t.best else set())) - set(t.truth)
+
+
 def _answered(t: Trial) -> bool:
     """The trial names something as the gap's cause: an attributed effect, or a `best` (which an ambiguous set
     that would be attributed gives too)."""
@@ -182,6 +188,11 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         row = coverage_by_effect.setdefault(n, [0, 0])
         row[0] += _covers(t, n)
         row[1] += 1
+    effect_trials = single + multi
+    extras_by_effect: dict[str, int] = {}
+    for t in effect_trials:
+        for n in sorted(_extra_attributions(t)):
+            extras_by_effect[n] = extras_by_effect.get(n, 0) + 1
     return {
         "trials": len(trials), "single_trials": len(single), "multi_trials": len(multi),
         "null_trials": len(nulls), "decoy_only_trials": len(decoy_only),
@@ -197,6 +208,10 @@ def score(trials: list[Trial]) -> dict[str, Any]:
                                                   for t, n in multi_pairs),
                                               len(multi_pairs)),
         "false_attribution_rate_null": frac(sum(_answered(t) for t in nulls), len(nulls)),
+        # precision on the trials that hold an effect: an effect attributed that is not among the hidden ones
+        "extra_attribution_rate_effect_trials": frac(sum(bool(_extra_attributions(t)) for t in effect_trials),
+                                                     len(effect_trials)),
+        "extra_attributions_by_effect": extras_by_effect,
         "decoys_unexplained": frac(sum(not _answered(t) for t in decoy_only), len(decoy_only)),
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),
         "interval_coverage_by_effect": coverage_by_effect,

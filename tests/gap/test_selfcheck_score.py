@@ -47,6 +47,21 @@ def test_top1_needs_the_truth_attributed_first_and_nulls_count_attributions_only
     assert s["false_attribution_rate_null"] == pytest.approx(0.5)
 
 
+def test_an_effect_attributed_beside_the_hidden_ones_counts_as_an_extra_attribution():
+    # a drift attributed after the hidden d31 curve (as on self-check trial 205600007), a best that leads a set
+    # the truth is not in; `unexplained` and `ambiguous` names without a best are not claims
+    trials = [_trial("multi", ["field_dependent_d31", "pzt_thickness"], best="field_dependent_d31",
+                     named={"field_dependent_d31": "attributed", "sensor_drift": "attributed"}),
+              _trial("single", ["width_loss"], best="cf_thickness", named={"cf_thickness": "ambiguous"},
+                     sets=[["cf_thickness", "pzt_modulus"]]),
+              _trial("single", ["creep"], best="creep", named={"creep": "attributed", "hysteresis": "unexplained",
+                                                               "width_loss": "ambiguous"}),
+              _trial("null", [], best="creep", named={"creep": "attributed"})]
+    s = score(trials)
+    assert s["extra_attribution_rate_effect_trials"] == pytest.approx(2 / 3)
+    assert s["extra_attributions_by_effect"] == {"sensor_drift": 1, "cf_thickness": 1}
+
+
 def test_an_ambiguous_best_counts_as_an_answer_right_or_wrong():
     # `best` can be the leader of a set the data cannot split: the truth leading it is top-1, another leading it
     # leaves the truth in the set; on a null it is a false attribution however it is labelled
