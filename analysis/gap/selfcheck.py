@@ -135,9 +135,14 @@ def _attributed(t: Trial) -> set[str]:
 
 
 def _extra_attributions(t: Trial) -> set[str]:
-    """Effects attributed (or `best`) that the trial does not hold: on a single- or multi-effect trial, what a null's
-    false attribution is on a null."""
-    return (_attributed(t) | ({t.best} if t.best else set())) - set(t.truth)
+    """Effects the trial does not hold but the diagnosis claims: attributed, or `best` unless it leads a set that
+    holds a hidden effect (a set the data cannot split, the truth in it, claims no more than the data show). On a
+    single- or multi-effect trial, what a null's false attribution is on a null."""
+    truth = set(t.truth)
+    claims = _attributed(t)
+    if t.best and not any(t.best in s and truth & set(s) for s in t.ambiguous_sets):
+        claims = claims | {t.best}
+    return claims - truth
 
 
 def _answered(t: Trial) -> bool:

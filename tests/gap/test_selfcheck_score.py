@@ -49,16 +49,19 @@ def test_top1_needs_the_truth_attributed_first_and_nulls_count_attributions_only
 
 def test_an_effect_attributed_beside_the_hidden_ones_counts_as_an_extra_attribution():
     # a drift attributed after the hidden d31 curve (as on self-check trial 205600007), a best that leads a set
-    # the truth is not in; `unexplained` and `ambiguous` names without a best are not claims
+    # the truth is not in; `unexplained` and `ambiguous` names without a best are not claims, and neither is a
+    # best that leads a set holding the truth
     trials = [_trial("multi", ["field_dependent_d31", "pzt_thickness"], best="field_dependent_d31",
                      named={"field_dependent_d31": "attributed", "sensor_drift": "attributed"}),
               _trial("single", ["width_loss"], best="cf_thickness", named={"cf_thickness": "ambiguous"},
                      sets=[["cf_thickness", "pzt_modulus"]]),
               _trial("single", ["creep"], best="creep", named={"creep": "attributed", "hysteresis": "unexplained",
                                                                "width_loss": "ambiguous"}),
+              _trial("single", ["base_compliance"], best="width_loss", named={"width_loss": "ambiguous"},
+                     sets=[["width_loss", "base_compliance"]]),
               _trial("null", [], best="creep", named={"creep": "attributed"})]
     s = score(trials)
-    assert s["extra_attribution_rate_effect_trials"] == pytest.approx(2 / 3)
+    assert s["extra_attribution_rate_effect_trials"] == pytest.approx(2 / 4)
     assert s["extra_attributions_by_effect"] == {"sensor_drift": 1, "cf_thickness": 1}
 
 
