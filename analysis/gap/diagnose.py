@@ -160,8 +160,8 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     named, best, cannot = decide(p, sel, judge)
     final = sel.fits[-1]
     last = sel.steps[-1]
-    unexplained = Remainder(last.heldout.rms, (float(last.heldout.ci95[0]), float(last.heldout.ci95[1])),
-                            res.global_test(p, final.z, len(final.layout.params))["p_value"], last.closed_fraction)
+    unexplained = Remainder(last.heldout, res.global_test(p, final.z, len(final.layout.params))["p_value"],
+                            last.closed_fraction)
     lags = {"/".join(q.key): final.value("lag", *q.key) for q in final.layout.params if q.kind == "lag"}
     diag = Diagnosis(where=where, gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
                      specimens=specimen_table(p, nominal, final), screening=screened, waterfall=sel.steps, named=named,

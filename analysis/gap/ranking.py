@@ -64,7 +64,7 @@ def select(p: Problem, nominal: Fit, screened: list[Screened], judge: Judge, gap
     rivals: dict[str, Fit] = {}   # the last step's rivals of its lead: their fits there, by candidate
     rescreened = False    # the turned-down candidates' short fits: once, at the first step after the nominal
     while gap and pool and len(current.names) < MAX_EFFECTS:
-        if current is not nominal and judge.heldout(current).ci95[0] <= 1.0:
+        if current is not nominal and judge.heldout(current).reaches_noise_floor:
             # at the noise floor; not tested on the nominal fit: the gap tests opened the diagnosis, and the
             # paired held-out reduction each candidate must pass is the stronger test there
             break

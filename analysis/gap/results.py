@@ -34,6 +34,11 @@ class HeldOut:
     rms: float
     ci95: tuple[float, float]
 
+    @property
+    def reaches_noise_floor(self) -> bool:
+        """Its interval reaches 1 (the noise floor): where the selection stops after a named effect."""
+        return bool(self.ci95[0] <= 1.0)
+
     def to_json(self) -> dict[str, Any]:
         return {"rms": self.rms, "ci95": list(self.ci95)}
 
@@ -122,17 +127,16 @@ class Remainder:
     whether that interval reaches the noise floor, the final fit's in-sample lack-of-fit p, and the share of the
     nominal held-out gap above the floor closed."""
 
-    heldout_rms: float
-    heldout_rms_ci95: tuple[float, float]
+    heldout: HeldOut
     lack_of_fit_p: float
     closed_fraction: float
 
     @property
     def at_noise_floor(self) -> bool:
-        return bool(self.heldout_rms_ci95[0] <= 1.0)
+        return self.heldout.reaches_noise_floor
 
     def to_json(self) -> dict[str, Any]:
-        return {"heldout_rms": self.heldout_rms, "heldout_rms_ci95": list(self.heldout_rms_ci95),
+        return {"heldout_rms": self.heldout.rms, "heldout_rms_ci95": list(self.heldout.ci95),
                 "at_noise_floor": self.at_noise_floor, "lack_of_fit_p": self.lack_of_fit_p,
                 "closed_fraction": self.closed_fraction}
 

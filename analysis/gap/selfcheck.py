@@ -193,10 +193,10 @@ def score(trials: list[Trial]) -> dict[str, Any]:
         row = coverage_by_effect.setdefault(n, [0, 0])
         row[0] += _covers(t, n)
         row[1] += 1
-    effect_trials = single + multi
+    extras = [_extra_attributions(t) for t in single + multi]
     extras_by_effect: dict[str, int] = {}
-    for t in effect_trials:
-        for n in sorted(_extra_attributions(t)):
+    for claimed in extras:
+        for n in sorted(claimed):
             extras_by_effect[n] = extras_by_effect.get(n, 0) + 1
     return {
         "trials": len(trials), "single_trials": len(single), "multi_trials": len(multi),
@@ -214,8 +214,7 @@ def score(trials: list[Trial]) -> dict[str, Any]:
                                               len(multi_pairs)),
         "false_attribution_rate_null": frac(sum(_answered(t) for t in nulls), len(nulls)),
         # precision on the trials that hold an effect: an effect attributed that is not among the hidden ones
-        "extra_attribution_rate_effect_trials": frac(sum(bool(_extra_attributions(t)) for t in effect_trials),
-                                                     len(effect_trials)),
+        "extra_attribution_rate_effect_trials": frac(sum(bool(c) for c in extras), len(extras)),
         "extra_attributions_by_effect": extras_by_effect,
         "decoys_unexplained": frac(sum(not _answered(t) for t in decoy_only), len(decoy_only)),
         "interval_coverage": frac(len(covered), len(coverage)), "coverage_effects": len(coverage),

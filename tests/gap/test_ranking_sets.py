@@ -25,7 +25,7 @@ def _diagnosis() -> Diagnosis:
                  Screened("creep", 0.0, {}, 1.0, 30.0, False)]
     return Diagnosis(where=[], gap_above_noise=True, nominal_lack_of_fit={}, specimens={}, screening=screening,
                      waterfall=waterfall, named=named, best=None,
-                     unexplained=Remainder(1.0, (1.0, 1.0), 1.0, 0.0), cannot_separate=[],
+                     unexplained=Remainder(HeldOut(1.0, (1.0, 1.0)), 1.0, 0.0), cannot_separate=[],
                      sensor_lag_s={}, ramp_rates_s=[], elapsed_s=0.0)
 
 
