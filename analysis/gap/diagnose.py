@@ -23,7 +23,7 @@ from analysis.gap.features import GapData
 from analysis.gap.heldout import Judge
 from analysis.gap.problem import WIDE_GAIN_BOUND, Fit, Problem
 from analysis.gap.ranking import select
-from analysis.gap.results import Diagnosis, Remainder
+from analysis.gap.results import DetectionLimit, Diagnosis, FitTrail, Population, Remainder, SpecimenDeviation
 from analysis.gap.screening import screen
 from analysis.gap.verdict import decide
 from hamr_bench.errors import ModelError
@@ -67,7 +67,7 @@ def _whitened_gains(p: Problem, fit: Fit, g: str) -> np.ndarray:
     return p.gain_whitening[g] @ np.array([fit.value("gain", g, 0), fit.value("gain", g, 1)])
 
 
-def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
+def population_test(p: Problem, fit: Fit) -> Population:
     """Are the specimens, as a population, where the tolerances put them? In-sample a shift common to every
     specimen is absorbed by their gains and leaves no lack of fit in the rows: it shows here.
 
@@ -85,18 +85,17 @@ def population_test(p: Problem, fit: Fit) -> dict[str, Any]:
     dof_total, dof_common = 2 * len(p.groups), 2 * len(by_type)
     p_total = float(stats.chi2.sf(total, dof_total)) if dof_total else 1.0
     p_common = float(stats.chi2.sf(common, dof_common)) if dof_common else 1.0
-    return {"chi2": total, "dof": dof_total, "p_total": p_total,
-            "common_chi2": common, "common_dof": dof_common, "p_common": p_common,
-            "p_value": min(1.0, 2.0 * min(p_total, p_common))}
+    return Population(chi2=total, dof=dof_total, p_total=p_total, common_chi2=common, common_dof=dof_common,
+                      p_common=p_common, p_value=min(1.0, 2.0 * min(p_total, p_common)))
 
 
-def detection_limits(p: Problem) -> dict[str, dict[str, Any]]:
+def detection_limits(p: Problem) -> dict[str, DetectionLimit]:
     """Per layer count: its specimens and, for each fabrication shift, the smallest change (a fraction, either sign,
     within the candidate's range) that moves their mean gains by DETECTION_SIGMAS, where the population test starts
     to see it in that layer count alone. A smaller shift common to every specimen looks like specimen scatter to
     any method that allows the tolerances (a shift every layer count shares shows a little sooner); the limit
     falls roughly as 1 / sqrt(specimens). None where no change within the range reaches it."""
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, DetectionLimit] = {}
     for layers in sorted(set(p.group_type.values()), key=str):
         groups = [g for g in p.groups if p.group_type[g] == layers]
         actuator, w = p.group_engine[groups[0]].actuator, p.gain_whitening[groups[0]]
@@ -106,7 +105,7 @@ def detection_limits(p: Problem) -> dict[str, dict[str, Any]]:
             ends = [_realisable(beyond, end) for end in FAMILIES[name].bounds if end != 0]
             found = [abs(optimize.brentq(beyond, 0.0, end, xtol=1e-6)) for end in ends if beyond(end) > 0]
             smallest[name] = min(found) if found else None
-        out[f"layers={layers}"] = {"specimens": len(groups), "smallest_common_shift": smallest}
+        out[f"layers={layers}"] = DetectionLimit(specimens=len(groups), smallest_common_shift=smallest)
     return out
 
 
@@ -126,16 +125,16 @@ def _beyond_detection(actuator: Any, whitening: np.ndarray, n: int, name: str, s
     return tol.common_shift_sigmas(actuator, whitening, n, name, s) - DETECTION_SIGMAS
 
 
-def specimen_table(p: Problem, fit: Fit, final: Fit | None = None) -> dict[str, dict[str, float]]:
+def specimen_table(p: Problem, fit: Fit, final: Fit | None = None) -> dict[str, SpecimenDeviation]:
     """Each specimen's fitted deviation from the presets in `fit` (free stroke and stiffness, %) and its prior
     score, and, where the `final` fit holds a field-dependent effect, its plates' thickness against the nominal."""
     out = {}
     for g in p.groups:
         a, b = fit.value("gain", g, 0), fit.value("gain", g, 1)
         score = float(np.linalg.norm(_whitened_gains(p, fit, g)))
-        out[g] = {"stroke_change": math.expm1(a), "stiffness_change": math.expm1(b), "tolerance_sigmas": score}
-        if final is not None and ("plate", g) in final.layout.index:
-            out[g]["plate_thickness_change"] = math.expm1(final.value("plate", g))
+        plate = math.expm1(final.value("plate", g)) if final and ("plate", g) in final.layout.index else None
+        out[g] = SpecimenDeviation(stroke_change=math.expm1(a), stiffness_change=math.expm1(b),
+                                   tolerance_sigmas=score, plate_thickness_change=plate)
     return out
 
 
@@ -149,8 +148,7 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     nominal = nominal_fit(p)
     lack = res.global_test(p, nominal.z, len(nominal.layout.params))
     population = population_test(p, nominal)
-    gap = lack["p_value"] < GAP_ALPHA or population["p_value"] < GAP_ALPHA
-    where = [g.to_json() for g in res.regions(p, nominal.z)]
+    gap = lack.p_value < GAP_ALPHA or population.p_value < GAP_ALPHA
     judge = Judge(p, seed, reference=nominal)
     # forked after the nominal fit, so the workers start from its warmed caches
     with FitPool(p, jobs if gap else 1, judge) as pool:
@@ -160,15 +158,14 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
     named, best, cannot = decide(p, sel, judge)
     final = sel.fits[-1]
     last = sel.steps[-1]
-    unexplained = Remainder(last.heldout, res.global_test(p, final.z, len(final.layout.params))["p_value"],
+    unexplained = Remainder(last.heldout, res.global_test(p, final.z, len(final.layout.params)).p_value,
                             last.closed_fraction)
     lags = {"/".join(q.key): final.value("lag", *q.key) for q in final.layout.params if q.kind == "lag"}
-    diag = Diagnosis(where=where, gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
+    return Diagnosis(where=res.regions(p, nominal.z), gap_above_noise=bool(gap), nominal_lack_of_fit=lack,
                      specimens=specimen_table(p, nominal, final), screening=screened, waterfall=sel.steps, named=named,
                      best=best, unexplained=unexplained, cannot_separate=cannot, sensor_lag_s=lags,
                      ramp_rates_s=p.ramp_rates, elapsed_s=time.perf_counter() - t0,
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
                      specimen_population=population, detection_limits=detection_limits(p),
-                     turned_down=sel.rejected, candidates=list(names))
-    diag.fits = {"problem": p, "nominal": nominal, "final": final, "steps": sel.fits}
-    return diag
+                     turned_down=sel.rejected, candidates=list(names),
+                     fits=FitTrail(problem=p, nominal=nominal, final=final, steps=list(sel.fits)))

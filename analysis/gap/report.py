@@ -175,8 +175,8 @@ def _overlay_panels(problem) -> dict[tuple[int, str], list[int]]:
 def write_report(diagnosis: Any, result: dict[str, Any], out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    problem = diagnosis.fits["problem"]
-    nominal, final = diagnosis.fits["nominal"], diagnosis.fits["final"]
+    problem = diagnosis.fits.problem
+    nominal, final = diagnosis.fits.nominal, diagnosis.fits.final
     fit0 = problem.model(nominal.layout, nominal.x)
     fit1 = problem.model(final.layout, final.x)
     label = " + ".join(e["effect"] for e in result["named"]) or "no effect named"

@@ -83,7 +83,23 @@ def phase_map(problem: Problem, z: np.ndarray) -> dict[str, dict[str, float]]:
     return {p: {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in d.items()} for p, d in out.items()}
 
 
-def global_test(problem: Problem, z: np.ndarray, n_params: int) -> dict[str, float]:
-    return {"chi2": float(np.sum(z ** 2)), "n_rows": int(z.size), "n_params": int(n_params),
-            "pure_error_dof": problem.pure_dof, "p_value": lack_of_fit_p(z, problem.pure_dof, n_params),
-            "z_rms": float(math.sqrt(np.mean(z ** 2)))}
+@dataclass
+class LackOfFit:
+    """A model's lack of fit over every row: chi^2 of the z-residuals, its F test against the pure error."""
+
+    chi2: float
+    n_rows: int
+    n_params: int
+    pure_error_dof: int
+    p_value: float
+    z_rms: float
+
+    def to_json(self) -> dict:
+        return {"chi2": self.chi2, "n_rows": self.n_rows, "n_params": self.n_params,
+                "pure_error_dof": self.pure_error_dof, "p_value": self.p_value, "z_rms": self.z_rms}
+
+
+def global_test(problem: Problem, z: np.ndarray, n_params: int) -> LackOfFit:
+    return LackOfFit(chi2=float(np.sum(z ** 2)), n_rows=int(z.size), n_params=int(n_params),
+                     pure_error_dof=int(problem.pure_dof), p_value=lack_of_fit_p(z, problem.pure_dof, n_params),
+                     z_rms=float(math.sqrt(np.mean(z ** 2))))

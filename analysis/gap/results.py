@@ -4,9 +4,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from analysis.gap.families import FAMILIES
+from analysis.gap.residuals import LackOfFit, Region
+
+if TYPE_CHECKING:
+    from analysis.gap.problem import Fit, Problem
 
 
 @dataclass
@@ -154,13 +158,72 @@ class AmbiguousSet:
 
 
 @dataclass
+class Population:
+    """The specimens as a population against their tolerances (`diagnose.population_test`): chi^2 of every
+    specimen's whitened gains (`total`) and of each layer count's mean (`common`), and the Bonferroni p of the two."""
+
+    chi2: float
+    dof: int
+    p_total: float
+    common_chi2: float
+    common_dof: int
+    p_common: float
+    p_value: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"chi2": self.chi2, "dof": self.dof, "p_total": self.p_total, "common_chi2": self.common_chi2,
+                "common_dof": self.common_dof, "p_common": self.p_common, "p_value": self.p_value}
+
+
+@dataclass
+class SpecimenDeviation:
+    """One specimen's fitted deviation from the presets (fractions) and its prior score; its plates' thickness
+    where the final fit holds a field-dependent d31."""
+
+    stroke_change: float
+    stiffness_change: float
+    tolerance_sigmas: float
+    plate_thickness_change: float | None = None
+
+    def to_json(self) -> dict[str, float]:
+        out = {"stroke_change": self.stroke_change, "stiffness_change": self.stiffness_change,
+               "tolerance_sigmas": self.tolerance_sigmas}
+        if self.plate_thickness_change is not None:
+            out["plate_thickness_change"] = self.plate_thickness_change
+        return out
+
+
+@dataclass
+class DetectionLimit:
+    """A layer count's specimens and, per fabrication shift, the smallest change common to them that the
+    population test sees (a fraction; None where none within the candidate's range does)."""
+
+    specimens: int
+    smallest_common_shift: dict[str, float | None]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"specimens": self.specimens, "smallest_common_shift": dict(self.smallest_common_shift)}
+
+
+@dataclass
+class FitTrail:
+    """The fits behind a diagnosis, for the report's plots and for tests: the problem, the nominal fit, each
+    selection step's fit (steps[0] is the nominal) and the final one."""
+
+    problem: Problem
+    nominal: Fit
+    final: Fit
+    steps: list[Fit]
+
+
+@dataclass
 class Diagnosis:
     """Everything `diagnose` finds: where the gap is, what explains how much of it, what the data cannot tell."""
 
-    where: list[dict[str, Any]]
+    where: list[Region]
     gap_above_noise: bool
-    nominal_lack_of_fit: dict[str, Any]
-    specimens: dict[str, Any]
+    nominal_lack_of_fit: LackOfFit
+    specimens: dict[str, SpecimenDeviation]   # by specimen group label ("layers=2|specimen=A")
     screening: list[Screened]
     waterfall: list[WaterfallStep]
     named: list[NamedEffect]
@@ -171,9 +234,9 @@ class Diagnosis:
     ramp_rates_s: list[float]
     elapsed_s: float
     recordings: list[dict[str, Any]] = field(default_factory=list)
-    specimen_population: dict[str, Any] = field(default_factory=dict)
-    detection_limits: dict[str, Any] = field(default_factory=dict)
-    fits: dict[str, Any] = field(default_factory=dict, repr=False)   # nominal and final Fit (report, selfcheck)
+    specimen_population: Population | None = None
+    detection_limits: dict[str, DetectionLimit] = field(default_factory=dict)   # by "layers=N"
+    fits: FitTrail | None = field(default=None, repr=False)
     # the candidates the step after the last named effect tried, none passing (why the selection stopped there)
     turned_down: list[StepCandidate] = field(default_factory=list)
     # every candidate this data can show at all (`diagnose.applicable`), screened or not: with no gap above the
@@ -209,10 +272,13 @@ class Diagnosis:
     def to_json(self) -> dict[str, Any]:
         return {"best": self.best, "ranking": self.ranking(), "named": [e.to_json() for e in self.named],
                 "waterfall": [w.to_json() for w in self.waterfall], "unexplained": self.unexplained.to_json(),
-                "cannot_separate": [c.to_json() for c in self.cannot_separate], "where": self.where,
-                "gap_above_noise": self.gap_above_noise, "nominal_lack_of_fit": self.nominal_lack_of_fit,
-                "specimen_population": self.specimen_population, "detection_limits": self.detection_limits,
-                "specimens": self.specimens, "screening": [s.to_json() for s in self.screening],
+                "cannot_separate": [c.to_json() for c in self.cannot_separate],
+                "where": [g.to_json() for g in self.where], "gap_above_noise": self.gap_above_noise,
+                "nominal_lack_of_fit": self.nominal_lack_of_fit.to_json(),
+                "specimen_population": self.specimen_population.to_json() if self.specimen_population else {},
+                "detection_limits": {k: v.to_json() for k, v in self.detection_limits.items()},
+                "specimens": {k: v.to_json() for k, v in self.specimens.items()},
+                "screening": [s.to_json() for s in self.screening],
                 "sensor_lag_s": self.sensor_lag_s, "ramp_rates_s": self.ramp_rates_s,
                 "heldout_units": "noise units (z = held-out residual / pure-error standard error / the nominal "
                                  "fit's predictive spread there, the same for every model); 1 = the noise floor",

@@ -33,25 +33,25 @@ def test_specimens_all_off_one_way_are_a_gap_where_none_is_alone():
     p, fit = _population([(2.0, 0.0)] * 5, [2] * 5)
     out = population_test(p, fit)
     assert stats.chi2.sf(4.0, 2) > 0.1
-    assert out["p_total"] > GAP_ALPHA
-    assert out["common_chi2"] == pytest.approx(5 * 4.0)
-    assert out["p_value"] < GAP_ALPHA
+    assert out.p_total > GAP_ALPHA
+    assert out.common_chi2 == pytest.approx(5 * 4.0)
+    assert out.p_value < GAP_ALPHA
 
 
 def test_specimens_scattered_every_way_are_not_a_common_shift():
     # the same distances from the centre, in opposite directions: no common shift, and no gap
     p, fit = _population([(2.0, 0.0), (-2.0, 0.0), (0.0, 2.0), (0.0, -2.0), (2.0, 0.0)], [2] * 5)
     out = population_test(p, fit)
-    assert out["common_chi2"] == pytest.approx(5 * 0.4 ** 2)   # 5 |mean|^2, the mean (0.4, 0)
-    assert out["p_value"] > GAP_ALPHA
+    assert out.common_chi2 == pytest.approx(5 * 0.4 ** 2)   # 5 |mean|^2, the mean (0.4, 0)
+    assert out.p_value > GAP_ALPHA
 
 
 def test_each_layer_count_is_its_own_batch():
     # two layer counts off in opposite directions: each batch's mean is off, their pooled mean would not be
     p, fit = _population([(2.0, 0.0)] * 4 + [(-2.0, 0.0)] * 4, [1] * 4 + [3] * 4)
     out = population_test(p, fit)
-    assert out["common_dof"] == 4
-    assert out["common_chi2"] == pytest.approx(2 * 4 * 4.0)
+    assert out.common_dof == 4
+    assert out.common_chi2 == pytest.approx(2 * 4 * 4.0)
 
 
 @pytest.fixture(scope="module")
@@ -113,15 +113,15 @@ def test_a_shift_at_its_detection_limit_moves_the_mean_gains_to_the_population_t
 
     one = detection_limits(problem(1))["layers=2"]
     four = detection_limits(problem(4))["layers=2"]
-    assert one["specimens"] == 1 and four["specimens"] == 4
-    for name, limit in four["smallest_common_shift"].items():
+    assert one.specimens == 1 and four.specimens == 4
+    for name, limit in four.smallest_common_shift.items():
         # more specimens see smaller shifts (about 1 / sqrt(n): exactly so for a change linear in the shift)
-        assert limit < one["smallest_common_shift"][name] or one["smallest_common_shift"][name] is None
+        assert limit < one.smallest_common_shift[name] or one.smallest_common_shift[name] is None
         # four specimens all shifted by their limit (the sign it was found on): the common test's chi^2 is at the
         # detection level; half that shift, either way, stays below it
         def common_sigmas(s, name=name):
             g = tol.whitening(a) @ (tol.log_outputs(tol.scaled(a, name, s)) - tol.log_outputs(a))
-            return float(np.sqrt(population_test(*_population([tuple(g)] * 4, [2] * 4))["common_chi2"]))
+            return float(np.sqrt(population_test(*_population([tuple(g)] * 4, [2] * 4)).common_chi2))
 
         lo, hi = FAMILIES[name].bounds
         signs = [x for x in (1.0, -1.0) if lo <= x * limit <= hi]
@@ -142,5 +142,5 @@ def test_detection_limits_stay_within_what_the_actuator_can_take():
         tol.scaled(a, "width_loss", 0.5)
     p = SimpleNamespace(groups=["g"], group_type={"g": 2}, group_engine={"g": SimpleNamespace(actuator=a)},
                         gain_whitening={"g": tol.whitening(a)})
-    limits = detection_limits(p)["layers=2"]["smallest_common_shift"]
+    limits = detection_limits(p)["layers=2"].smallest_common_shift
     assert set(limits) >= {"width_loss", "pzt_thickness"}

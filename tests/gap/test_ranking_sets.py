@@ -3,6 +3,7 @@ effect named for it, with the figures of the step that tried them, not among the
 
 from __future__ import annotations
 
+from analysis.gap.residuals import LackOfFit
 from analysis.gap.results import (Diagnosis, HeldOut, NamedEffect, Remainder, Screened, StepCandidate,
                                    WaterfallStep)
 
@@ -23,7 +24,8 @@ def _diagnosis() -> Diagnosis:
     screening = [Screened("hysteresis", 0.01, {}, 40.0, 30.0, True), Screened("base_compliance", 3e-4, {}, 20.0,
                  30.0, False), Screened("width_loss", 0.2, {}, 895.0, 30.0, True),
                  Screened("creep", 0.0, {}, 1.0, 30.0, False)]
-    return Diagnosis(where=[], gap_above_noise=True, nominal_lack_of_fit={}, specimens={}, screening=screening,
+    return Diagnosis(where=[], gap_above_noise=True, nominal_lack_of_fit=LackOfFit(0.0, 0, 0, 0, 1.0, 0.0),
+                     specimens={}, screening=screening,
                      waterfall=waterfall, named=named, best=None,
                      unexplained=Remainder(HeldOut(1.0, (1.0, 1.0)), 1.0, 0.0), cannot_separate=[],
                      sensor_lag_s={}, ramp_rates_s=[], elapsed_s=0.0)

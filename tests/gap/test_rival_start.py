@@ -54,7 +54,7 @@ def test_the_rival_named_after_the_lead_is_fitted_out_of_the_leads_basin(hystere
     r, carried = hysteresis_case
     steps = [s.added for s in r.waterfall[1:]]
     assert steps[:2] == ["field_dependent_d31", "hysteresis"], steps
-    p, after_lead, joint = r.fits["problem"], r.fits["steps"][1], r.fits["steps"][2]
+    p, after_lead, joint = r.fits.problem, r.fits.steps[1], r.fits.steps[2]
     # the hysteresis, the d31 curve's rival at the first step, got a second start at the next: its own fit
     # there with the lead carried over
     assert (("field_dependent_d31",), "hysteresis") in carried, carried

@@ -38,7 +38,7 @@ def hidden_creep():
 
 def test_a_creep_turned_down_at_screening_is_named_by_its_second_look(hidden_creep):
     _, r = hidden_creep
-    p, nominal = r.fits["problem"], r.fits["nominal"]
+    p, nominal = r.fits.problem, r.fits.nominal
     screened = [dataclasses.replace(s, promising=False) if s.name == "creep" else s for s in r.screening]
     sel = select(p, nominal, screened, Judge(p, TRIAL_SEED, reference=nominal), gap=True)
     assert [s.added for s in sel.steps[1:3]] == ["field_dependent_d31", "creep"]
@@ -46,7 +46,7 @@ def test_a_creep_turned_down_at_screening_is_named_by_its_second_look(hidden_cre
 
 def test_held_at_the_d31_fit_no_grid_strength_of_the_creep_lowers_the_objective(hidden_creep):
     _, r = hidden_creep
-    p, after_d31 = r.fits["problem"], r.fits["steps"][1]
+    p, after_d31 = r.fits.problem, r.fits.steps[1]
     objective, _ = grid_best(p, after_d31, "creep")
     assert objective > after_d31.objective
 
