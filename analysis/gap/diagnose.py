@@ -168,4 +168,4 @@ def diagnose(data: GapData, fit_params: dict | None = None, candidates: Sequence
                      recordings=data.provenance() if hasattr(data, "provenance") else [],
                      specimen_population=population, detection_limits=detection_limits(p),
                      turned_down=sel.rejected, candidates=list(names),
-                     fits=FitTrail(problem=p, nominal=nominal, final=final, steps=list(sel.fits)))
+                     fits=FitTrail(problem=p, steps=list(sel.fits)))

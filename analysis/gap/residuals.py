@@ -5,31 +5,14 @@ test per region and the regions whose gap exceeds noise ranked by size."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
 from analysis.gap.problem import Problem
+from analysis.gap.results import LackOfFit, Region
 
 ALPHA = 0.01
-
-
-@dataclass
-class Region:
-    protocol: str
-    condition: str
-    quantity: str
-    rows: np.ndarray          # indices into Problem.rows
-    rms_gap: float            # RMS residual, physical unit of `quantity`
-    noise_floor: float        # RMS standard error of the rows (same unit)
-    p_value: float            # lack-of-fit F test: mean z^2 over the pure-error variance
-    z_rms: float
-
-    def to_json(self) -> dict:
-        return {"protocol": self.protocol, "condition": self.condition, "quantity": self.quantity,
-                "rms_gap": self.rms_gap, "noise_floor": self.noise_floor, "p_value": self.p_value,
-                "gap_over_noise": self.z_rms, "n_rows": int(self.rows.size)}
 
 
 def condition_label(problem: Problem, i: int) -> str:
@@ -81,22 +64,6 @@ def phase_map(problem: Problem, z: np.ndarray) -> dict[str, dict[str, float]]:
     for i, r in enumerate(problem.rows):
         out.setdefault(r.protocol, {}).setdefault(f"{r.phase}/{r.direction}", []).append(z[i])  # type: ignore
     return {p: {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in d.items()} for p, d in out.items()}
-
-
-@dataclass
-class LackOfFit:
-    """A model's lack of fit over every row: chi^2 of the z-residuals, its F test against the pure error."""
-
-    chi2: float
-    n_rows: int
-    n_params: int
-    pure_error_dof: int
-    p_value: float
-    z_rms: float
-
-    def to_json(self) -> dict:
-        return {"chi2": self.chi2, "n_rows": self.n_rows, "n_params": self.n_params,
-                "pure_error_dof": self.pure_error_dof, "p_value": self.p_value, "z_rms": self.z_rms}
 
 
 def global_test(problem: Problem, z: np.ndarray, n_params: int) -> LackOfFit:

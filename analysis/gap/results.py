@@ -3,14 +3,49 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from analysis.gap.families import FAMILIES
-from analysis.gap.residuals import LackOfFit, Region
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from analysis.gap.problem import Fit, Problem
+
+
+@dataclass
+class Region:
+    """One protocol x condition (x phase) of the rows: its gap against its noise floor (`residuals.regions`)."""
+
+    protocol: str
+    condition: str
+    quantity: str
+    rows: np.ndarray          # indices into Problem.rows
+    rms_gap: float            # RMS residual, physical unit of `quantity`
+    noise_floor: float        # RMS standard error of the rows (same unit)
+    p_value: float            # lack-of-fit F test: mean z^2 over the pure-error variance
+    z_rms: float
+
+    def to_json(self) -> dict:
+        return {"protocol": self.protocol, "condition": self.condition, "quantity": self.quantity,
+                "rms_gap": self.rms_gap, "noise_floor": self.noise_floor, "p_value": self.p_value,
+                "gap_over_noise": self.z_rms, "n_rows": int(self.rows.size)}
+
+
+@dataclass
+class LackOfFit:
+    """A model's lack of fit over every row: chi^2 of the z-residuals, its F test against the pure error."""
+
+    chi2: float
+    n_rows: int
+    n_params: int
+    pure_error_dof: int
+    p_value: float
+    z_rms: float
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 @dataclass
@@ -171,8 +206,7 @@ class Population:
     p_value: float
 
     def to_json(self) -> dict[str, Any]:
-        return {"chi2": self.chi2, "dof": self.dof, "p_total": self.p_total, "common_chi2": self.common_chi2,
-                "common_dof": self.common_dof, "p_common": self.p_common, "p_value": self.p_value}
+        return asdict(self)
 
 
 @dataclass
@@ -186,11 +220,7 @@ class SpecimenDeviation:
     plate_thickness_change: float | None = None
 
     def to_json(self) -> dict[str, float]:
-        out = {"stroke_change": self.stroke_change, "stiffness_change": self.stiffness_change,
-               "tolerance_sigmas": self.tolerance_sigmas}
-        if self.plate_thickness_change is not None:
-            out["plate_thickness_change"] = self.plate_thickness_change
-        return out
+        return {k: v for k, v in asdict(self).items() if v is not None}   # the plates only where fitted
 
 
 @dataclass
@@ -202,18 +232,24 @@ class DetectionLimit:
     smallest_common_shift: dict[str, float | None]
 
     def to_json(self) -> dict[str, Any]:
-        return {"specimens": self.specimens, "smallest_common_shift": dict(self.smallest_common_shift)}
+        return asdict(self)
 
 
 @dataclass
 class FitTrail:
-    """The fits behind a diagnosis, for the report's plots and for tests: the problem, the nominal fit, each
-    selection step's fit (steps[0] is the nominal) and the final one."""
+    """The fits behind a diagnosis, for the report's plots and for tests: the problem and each selection step's
+    fit, the nominal first and the final one last."""
 
     problem: Problem
-    nominal: Fit
-    final: Fit
     steps: list[Fit]
+
+    @property
+    def nominal(self) -> Fit:
+        return self.steps[0]
+
+    @property
+    def final(self) -> Fit:
+        return self.steps[-1]
 
 
 @dataclass

@@ -3,8 +3,7 @@ effect named for it, with the figures of the step that tried them, not among the
 
 from __future__ import annotations
 
-from analysis.gap.residuals import LackOfFit
-from analysis.gap.results import (Diagnosis, HeldOut, NamedEffect, Remainder, Screened, StepCandidate,
+from analysis.gap.results import (Diagnosis, HeldOut, LackOfFit, NamedEffect, Remainder, Screened, StepCandidate,
                                    WaterfallStep)
 
 
