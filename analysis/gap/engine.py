@@ -104,6 +104,22 @@ class _PlateDrive:
     sample_of: np.ndarray
 
 
+@dataclass(frozen=True)
+class _DriveSegments:
+    """The dense grid cut where any plate's voltage (or the bias) changes: a staircase repeats itself in ~3 of 4
+    cells, and hysteresis and the d31 gain, functions of the plates' voltages and memories, then hold too, so they
+    are evaluated once per segment. `start`: each segment's first dense sample; `of`: per dense sample, its
+    segment."""
+
+    start: np.ndarray
+    of: np.ndarray
+
+
+def _creeps(effects: Effects) -> bool:
+    cr = effects.get("creep")
+    return cr is not None and cr.strength != 0
+
+
 def base_params(run: Any, fit_params: dict | None = None) -> tuple[ActuatorParams, DesignParams | None]:
     """The nominal actuator and design of a run: the presets the recording names (layers, design, parameter set),
     then a fit's values if given. The recording's `model_params` are NOT used: on the simulated bench they are
@@ -209,6 +225,9 @@ class RunEngine:
         self._plate_voltages: np.ndarray | None = None
         self._plate_drive: list[_PlateDrive] | None = None
         self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+        self._drive_segments: _DriveSegments | None = None
+        self._plates_per_segment: np.ndarray | None = None
+        self._net_per_segment: np.ndarray | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._played_net: WindowMean | None = None
@@ -256,19 +275,19 @@ class RunEngine:
         return v
 
     def _plate_gains(self, d31: EffectValue, t_p: float) -> np.ndarray:
-        """[G(V_drive), G(V_bias - V_drive)] on the dense grid (shape (2, n)): each plate's d31 relative to the
-        nominal one at its voltage."""
+        """[G(V_drive), G(V_bias - V_drive)] per drive segment (shape (2, segments)): each plate's d31 relative to
+        the nominal one at its voltage."""
         knee = 10.0 ** d31.shape("log10_knee_V_per_um", "field_dependent_d31")
         p = d31.shape("steepness", "field_dependent_d31")
         ref = self.actuator.pzt_thickness_m
         if self._plate_levels is None:
-            # the plates' voltages are the run's, and a staircase holds few distinct ones (~1 in 12 samples): the
-            # gain is computed on those (with their logs, once) and spread back
+            # a staircase holds few distinct voltages: the gain is computed on those (with their logs, once) and
+            # spread back to the segments
             self._plate_levels = []
-            for v in self._plates():
+            for v in self._segment_plates():
                 levels, where = np.unique(v, return_inverse=True)
                 self._plate_levels.append((levels, op.log_magnitude(levels), where))
-        out = np.empty((2, self.dense_t.size))
+        out = np.empty((2, self._segments().start.size))
         for row, (levels, log_v, where) in zip(out, self._plate_levels, strict=True):
             np.take(op.plate_gain(levels, t_p, d31.strength, knee, p, ref, log_v), where, out=row)
         return out
@@ -279,6 +298,27 @@ class RunEngine:
             self._plate_voltages = np.stack([self.dense_vd, self.dense_vb - self.dense_vd])
             self._plate_voltages.flags.writeable = False
         return self._plate_voltages
+
+    def _segments(self) -> _DriveSegments:
+        """The dense grid's drive segments (`_DriveSegments`), built once per run."""
+        if self._drive_segments is None:
+            v = self._plates()
+            changes = np.r_[True, (v[:, 1:] != v[:, :-1]).any(axis=0) | (self.dense_vb[1:] != self.dense_vb[:-1])]
+            self._drive_segments = _DriveSegments(np.flatnonzero(changes), np.cumsum(changes) - 1)
+        return self._drive_segments
+
+    def _segment_plates(self) -> np.ndarray:
+        """Each plate's voltage per drive segment (shape (2, segments), read-only)."""
+        if self._plates_per_segment is None:
+            self._plates_per_segment = self._plates()[:, self._segments().start]
+            self._plates_per_segment.flags.writeable = False
+        return self._plates_per_segment
+
+    def _segment_net(self) -> np.ndarray:
+        """The net drive as played on the dense grid (no effect), per drive segment."""
+        if self._net_per_segment is None:
+            self._net_per_segment = self._dense_net[self._segments().start]
+        return self._net_per_segment
 
     def _plate_drives(self) -> list[_PlateDrive]:
         """Each plate's drive on the dense grid, at its changes only, with its play memory there
@@ -301,26 +341,37 @@ class RunEngine:
         return ("y", t_p) + tuple((n, v.strength, tuple(sorted(v.shapes.items()))) for n, v in sorted(effects.items())
                                   if FAMILIES[n].kind == "drive")
 
+    def _effective(self, effects: Effects, t_p: float) -> np.ndarray:
+        """The effective net drive after the drive effects, per drive segment, or on the dense grid where creep
+        acts (its response moves within a segment); memoised."""
+        return self._memo(self._drive_key(effects, t_p), lambda: self._effective_drive(effects, t_p))
+
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """The effective net drive on the dense grid after hysteresis, d31(E) and creep (V)."""
-        return self._memo(self._drive_key(effects, t_p), lambda: self._effective_drive(effects, t_p))
+        y = self._effective(effects, t_p)
+        return y if _creeps(effects) else y[self._segments().of]
 
     def _drive_at(self, times: str, te: np.ndarray, lags: tuple[float, float], effects: Effects,
                   t_p: float) -> np.ndarray:
         """The effective drive at the lagged sample times `te` of `times` ("t": the rows' samples, "rt": the camera
-        reference's): the played staircase itself, plus what the drive effects change, read from the dense grid.
-        Both are kept for the last few keys: a Jacobian's columns for gains, contact shifts and drift coefficients
-        leave the lags and the drive alone, and those for the drive effects leave the lags alone."""
+        reference's): the played staircase itself, plus what the drive effects change, read from the dense grid
+        (from its segments where the change is constant on each). Both are kept for the last few keys: a
+        Jacobian's columns for gains, contact shifts and drift coefficients leave the lags and the drive alone, and
+        those for the drive effects leave the lags alone."""
         key = (times, lags) + self._drive_key(effects, t_p)
         y = _recall(self._at, key)
         if y is None:
             y = self._played_at(times, te, lags)
             if any(FAMILIES[n].kind == "drive" for n in effects):
-                places = _recall(self._places, (times, lags))
+                dense = _creeps(effects)
+                places = _recall(self._places, (times, lags, dense))
                 if places is None:
                     places = GridPlaces.of(te, float(self.dense_t[0]), DENSE_DT_S, self.dense_t.size)
-                    _keep(self._places, (times, lags), places)
-                y = y + places.interp(self.effective_drive(effects, t_p) - self._dense_net)
+                    if not dense:
+                        places = places.through(self._segments().of)
+                    _keep(self._places, (times, lags, dense), places)
+                net = self._dense_net if dense else self._segment_net()
+                y = y + places.interp(self._effective(effects, t_p) - net)
             _keep(self._at, key, y)
         return y
 
@@ -336,22 +387,24 @@ class RunEngine:
         return y
 
     def _plate_loops(self, strength: float, gamma: float, tip: float) -> np.ndarray:
-        """Each plate's voltage through its hysteresis on the dense grid (shape (2, n), V)."""
+        """Each plate's voltage through its hysteresis per drive segment (shape (2, segments), V)."""
         w = op.plate_weights(strength, gamma, tip)
-        out = np.empty((2, self.dense_t.size))
+        start = self._segments().start
+        out = np.empty((2, start.size))
         for row, d in zip(out, self._plate_drives(), strict=True):
-            np.take(op.plate_hysteresis_split(d.above, d.below, d.memory, w, tip), d.sample_of, out=row)
+            np.take(op.plate_hysteresis_split(d.above, d.below, d.memory, w, tip), d.sample_of[start], out=row)
         out *= FULL_SCALE_V
         return out
 
     def _effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """Per plate: its voltage, through its hysteresis (the switching thresholds are fields: the plate's own
         voltage, not a d31-scaled one, so a plate's memory is computed once), times its d31(E) gain; the net drive
-        bottom - top; then creep."""
+        bottom - top; then creep. Per drive segment (every plate's voltage holds within one), on the dense grid
+        where creep acts."""
         d31 = effects.get("field_dependent_d31")
         hy = effects.get("hysteresis")
         cr = effects.get("creep")
-        plates = self._plates()
+        plates = self._segment_plates()
         h_key = None
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
@@ -368,7 +421,7 @@ class RunEngine:
         y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
             n = cr.shape("exponent", "creep")
-            base = y
+            base = y = y[self._segments().of]
             resp = self._memo(("creep", n, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n))
             y = y + cr.strength * resp
         return y

@@ -80,6 +80,11 @@ class GridPlaces:
         lo = np.clip(np.floor(u), 0, n - 2).astype(np.intp)
         return cls(lo, lo + 1, np.clip(u - lo, 0.0, 1.0))
 
+    def through(self, index: np.ndarray) -> GridPlaces:
+        """The same places on a coarser grid whose node `index[k]` holds grid node k's value: interpolating the
+        coarse values there is interpolating the grid's, to the bit."""
+        return GridPlaces(index[self.lo], index[self.hi], self.frac)
+
     def interp(self, y: np.ndarray) -> np.ndarray:
         """np.interp of the grid's values y at the times."""
         a = y[self.lo]
