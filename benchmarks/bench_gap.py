@@ -5,6 +5,7 @@ reduction). Usage:
     python3 -m benchmarks.bench_gap campaign DIR            # time `diagnose` on a campaign's recordings
     python3 -m benchmarks.bench_gap evaluations DIR         # ms per model evaluation, per candidate
     python3 -m benchmarks.bench_gap selfcheck [N] [SEED] [JOBS]
+    python3 -m benchmarks.bench_gap design [N] [SEED]       # the bars' ceilings per data design (no simulation)
 """
 
 from __future__ import annotations
@@ -66,6 +67,23 @@ def bench_evaluations(directory: str, n: int = 60) -> None:
             print(f"  {names[0] if names else 'nominal'}: {(time.perf_counter() - t0) / n * 1e3:.1f} ms per evaluation")
 
 
+def bench_design(n: int, seed: int) -> None:
+    """Of the self-check's N draws at SEED, how many hidden shifts and springs each data design can tell from
+    fabrication scatter, and the top-1 and multi-effect figures no honest method can exceed there
+    (`analysis.gap.design_study`)."""
+    from analysis.gap.design_study import Design, design_shares
+
+    designs = [Design((2,), k) for k in (3, 6, 12)] + [Design((1, 2, 3), k) for k in (3, 5, 10)]
+    seeds = [seed * 100_000 + i for i in range(n)]
+    print(f"{n} self-check draws, seed {seed} (the self-check builds 3 specimens of the 2-layer actuator)")
+    print(f"{'design':34s} {'single: gain effects detectable':>32s} {'top-1 ceiling':>14s} "
+          f"{'multi: gain effects detectable':>31s} {'named ceiling':>14s}")
+    for r in design_shares(seeds, designs):
+        print(f"{r.design.label:34s} {r.single_gain_detectable:>14d} of {r.single_gain:<3d} ({r.single} trials)"
+              f" {r.single_ceiling:>13.1%} {r.multi_gain_detectable:>14d} of {r.multi_gain:<3d} "
+              f"({r.multi_effects} effects) {r.multi_ceiling:>11.1%}")
+
+
 def bench_selfcheck(n: int, seed: int, jobs: int) -> None:
     from analysis.gap.selfcheck import selfcheck
 
@@ -85,6 +103,8 @@ if __name__ == "__main__":
         bench_campaign(args[1])
     elif args and args[0] == "evaluations":
         bench_evaluations(args[1])
+    elif args and args[0] == "design":
+        bench_design(int(args[1]) if len(args) > 1 else 200, int(args[2]) if len(args) > 2 else 2056)
     else:
         n = int(args[1]) if len(args) > 1 else 100
         seed = int(args[2]) if len(args) > 2 else 1
