@@ -81,9 +81,11 @@ class SpecimenTruth:
     seed: int
     actuator: dict[str, float]
     design: dict[str, Any]
+    layers: int = 2
 
     def to_json(self) -> dict[str, Any]:
-        return {"label": self.label, "seed": self.seed, "actuator": dict(self.actuator), "design": dict(self.design)}
+        return {"label": self.label, "seed": self.seed, "layers": self.layers, "actuator": dict(self.actuator),
+                "design": dict(self.design)}
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,11 @@ class Scenario:
     layers: int = 2
     params_set: str = "effective"
 
+    @property
+    def layer_counts(self) -> tuple[int, ...]:
+        """The layer counts of the case's specimens, in order."""
+        return tuple(sorted({s.layers for s in self.specimens})) or (self.layers,)
+
     def effects_argument(self) -> dict[str, float]:
         return {e.name: e.strength for e in self.effects}
 
@@ -104,12 +111,13 @@ class Scenario:
 
     def sim_keys(self, specimen: int = 0) -> dict[str, Any]:
         """The `[sim]` keys of this case for one specimen."""
-        return {"design": self.design, "layers": self.layers, "params": self.params_set,
+        return {"design": self.design, "layers": self.specimens[specimen].layers, "params": self.params_set,
                 "effects": self.effects_argument(), "effect_shapes": self.shapes_argument(),
                 "specimen_seed": self.specimens[specimen].seed}
 
     def bench_settings(self, fixture: str, specimen: int = 0, seed: int = 0) -> BenchSettings:
-        return BenchSettings(fixture=fixture, design=self.design, layers=self.layers, params_set=self.params_set,
+        return BenchSettings(fixture=fixture, design=self.design, layers=self.specimens[specimen].layers,
+                             params_set=self.params_set,
                              effects=self.effects_argument(), effect_shapes=self.shapes_argument(), seed=seed,
                              specimen_seed=self.specimens[specimen].seed)
 
@@ -127,9 +135,11 @@ class Scenario:
 def draw_scenario(seed: int, *, null_fraction: float = 0.15, decoy_fraction: float = 0.10,
                   multi_fraction: float = 0.35, max_effects: int = 3, n_specimens: int = 3, design: int = 4,
                   layers: int = 2, fixtures: tuple[str, ...] = ("actuator", "leg"),
-                  pool: tuple[str, ...] | None = None) -> Scenario:
+                  pool: tuple[str, ...] | None = None, layer_counts: tuple[int, ...] | None = None) -> Scenario:
     """One hidden case. `fixtures`: which fixtures the trial records (effects only a leg shows are left out of an
-    actuator-only draw); `pool`: library effects to draw from (default: all a trial of these fixtures can see)."""
+    actuator-only draw); `pool`: library effects to draw from (default: all a trial of these fixtures can see);
+    `layer_counts`: build `n_specimens` of each (default: of `layers` alone, which they must include; the effects'
+    strengths refer to the `layers` actuator, and its specimens are drawn as without the others)."""
     for name, value in (("null_fraction", null_fraction), ("decoy_fraction", decoy_fraction),
                         ("multi_fraction", multi_fraction)):
         if not 0 <= value <= 1:
@@ -138,6 +148,9 @@ def draw_scenario(seed: int, *, null_fraction: float = 0.15, decoy_fraction: flo
         raise ValueError("null_fraction + decoy_fraction must not exceed 1")
     if not 1 <= max_effects <= 3 or n_specimens < 1:
         raise ValueError("max_effects must be 1-3 and n_specimens >= 1")
+    counts = tuple(layer_counts or (layers,))
+    if layers not in counts or len(set(counts)) != len(counts) or min(counts) < 1:
+        raise ValueError(f"layer_counts {counts} must be distinct positive layer counts including layers={layers}")
     rng = np.random.default_rng([int(seed), 0x5CE7A])
     leg = "leg" in fixtures
     library = tuple(n for n in (pool or LIBRARY_EFFECTS) if leg or n not in LEG_ONLY)
@@ -160,7 +173,20 @@ def draw_scenario(seed: int, *, null_fraction: float = 0.15, decoy_fraction: flo
     specimens = tuple(_specimen(str(k + 1), int(rng.integers(2 ** 31)), design, layers)
                       for k in range(n_specimens))
     effects = tuple(_effect(name, rng, layers) for name in names)
+    specimens += _other_layer_counts(seed, counts, layers, n_specimens, design)
     return Scenario(seed=int(seed), kind=kind, effects=effects, specimens=specimens, design=design, layers=layers)
+
+
+def _other_layer_counts(seed: int, counts: tuple[int, ...], layers: int, n_specimens: int,
+                        design: int) -> tuple[SpecimenTruth, ...]:
+    """The specimens of the layer counts besides `layers`, each count from its own stream (so the rest of the
+    draw is the same with them as without), labelled `<layers>L<k>`."""
+    out: list[SpecimenTruth] = []
+    for n in counts:
+        if n != layers:
+            rng = np.random.default_rng([int(seed), 0x5CE7A, n])
+            out += [_specimen(f"{n}L{k + 1}", int(rng.integers(2 ** 31)), design, n) for k in range(n_specimens)]
+    return tuple(out)
 
 
 def _specimen(label: str, seed: int, design: int, layers: int) -> SpecimenTruth:
@@ -169,7 +195,7 @@ def _specimen(label: str, seed: int, design: int, layers: int) -> SpecimenTruth:
     a2, d2 = apply_model_overrides(a, d, drawn)
     return SpecimenTruth(label, seed, {k: float(getattr(a2, k)) for k in drawn["actuator"]},
                          {"k_ser_N_per_m": d2.k_ser_N_per_m, "kappa_N_m_per_rad": list(d2.kappa_N_m_per_rad),
-                          "bias_m": d2.bias_m})
+                          "bias_m": d2.bias_m}, layers)
 
 
 def draw_strength(name: str, rng: np.random.Generator) -> float:

@@ -19,6 +19,7 @@ written.
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +45,7 @@ def record_specimens(scenario: Scenario, out_dir: Path, set_options: list[str] |
     for k, specimen in enumerate(scenario.specimens):
         rig = scenario.rig_file(out_dir / f"rig-specimen{specimen.label}.toml", specimen=k)
         path = out_dir / f"actuator-specimen{specimen.label}.mcap"
-        result = run_protocol(RunRequest(protocol="actuator", out=path, rig_path=rig, layers=scenario.layers,
+        result = run_protocol(RunRequest(protocol="actuator", out=path, rig_path=rig, layers=specimen.layers,
                                          design=scenario.design, seed=seed * 1000 + k, overwrite=True,
                                          set_options=list(set_options or []), specimen=specimen.label))
         if not result.ok:
@@ -94,8 +95,9 @@ def specimen_rows(reader: RecordingReader, test: str, voltage_V: float, t_origin
 
 def export_actuator_traces(scenario: Scenario, out_dir: Path, recordings: list[Path] | None = None,
                            set_options: list[str] | None = None, seed: int = 0) -> list[Path]:
-    """Write the CSV files (recording the specimens first unless their recordings are given, in specimen order).
-    Returns the files written, named `actuator-<test>-<layers>x-<V>V.csv`."""
+    """Write the CSV files (recording the specimens first unless their recordings are given, in specimen order),
+    one per test x layer count x V_bias. Returns the files written, named `actuator-<test>-<layers>x-<V>V.csv`
+    (`exported_layers` reads the layer count back)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = recordings or record_specimens(scenario, out_dir / "runs", set_options, seed)
@@ -104,22 +106,33 @@ def export_actuator_traces(scenario: Scenario, out_dir: Path, recordings: list[P
                        if c.get("mode") in TESTS})
     written = []
     for test in TESTS:
-        for v in voltages:
-            target = out_dir / f"actuator-{test}-{scenario.layers}x-{v:g}V.csv"
-            with target.open("w", newline="", encoding="utf-8") as fh:
-                writer = csv.writer(fh)
-                writer.writerow(COLUMNS)
-                count = 0
-                for specimen, reader in zip(scenario.specimens, readers, strict=True):
-                    origin = reader.events()[0].time_s
-                    for row in specimen_rows(reader, test, v, origin):
-                        writer.writerow([_cell(x) for x in row] + [specimen.label])
-                        count += 1
-            if count:
-                written.append(target)
-            else:
-                target.unlink()
+        for layers in scenario.layer_counts:
+            for v in voltages:
+                target = out_dir / f"actuator-{test}-{layers}x-{v:g}V.csv"
+                with target.open("w", newline="", encoding="utf-8") as fh:
+                    writer = csv.writer(fh)
+                    writer.writerow(COLUMNS)
+                    count = 0
+                    for specimen, reader in zip(scenario.specimens, readers, strict=True):
+                        if specimen.layers != layers:
+                            continue
+                        origin = reader.events()[0].time_s
+                        for row in specimen_rows(reader, test, v, origin):
+                            writer.writerow([_cell(x) for x in row] + [specimen.label])
+                            count += 1
+                if count:
+                    written.append(target)
+                else:
+                    target.unlink()
     return written
+
+
+def exported_layers(path: Path) -> int:
+    """The layer count of a file `export_actuator_traces` wrote (from its name)."""
+    match = re.fullmatch(r"actuator-\w+-(\d+)x-.*", Path(path).stem)
+    if match is None:
+        raise ValueError(f"{path}: not a file export_actuator_traces writes")
+    return int(match.group(1))
 
 
 def _cell(value: Any) -> str:

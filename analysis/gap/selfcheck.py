@@ -5,8 +5,8 @@ effects in the simulated bench's GENERATOR forms (which share no formula with th
 lists them side by side), decoys outside the library, nulls, and several specimens whose parameters are drawn
 within fabrication tolerances, so the nominal model is off from the truth as on a real rig. Each specimen runs the
 actuator protocol through the real drivers against the emulators; the runs are written as another lab's CSV files
-(`sim_devices.trace_export`: one file per test x V_bias, the specimens one after another, the project's commanded
-timelines dropped), imported with the documented importer and diagnosed from the imported recordings alone. The
+(`sim_devices.trace_export`: one file per test x layer count x V_bias, the specimens one after another, the
+project's commanded timelines dropped), imported with the documented importer and diagnosed from the imported recordings alone. The
 diagnosis is never told the effect, its strength or the specimens' parameters.
 
 Scores (`score`): top-1 on single-effect trials, every effect named on multi-effect trials, false attributions on
@@ -32,14 +32,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from analysis.gap.diagnose import DETECTION_SIGMAS
-
 if TYPE_CHECKING:
     from sim_devices.scenarios import Scenario
 
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
 TRIAL_SPECIMENS = 3
+TRIAL_LAYERS = (2,)   # the layer counts a trial builds its specimens of (the effects' strengths refer to 2 layers)
 # Library effects an actuator-only trace cannot show, left out of the draw (reported with the figures).
 EXCLUDED_FROM_DRAW: dict[str, str] = {
     "stage_backlash": "the exported traces hold blocked-force and free-displacement steps only; no stage reversal",
@@ -73,36 +72,43 @@ def _draw_pool() -> tuple[str, ...]:
 
 
 def draw_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-               specimens: int = TRIAL_SPECIMENS) -> Scenario:
-    """The trial's scenario: what the simulated bench will hold (effects, strengths, specimens)."""
+               specimens: int = TRIAL_SPECIMENS, layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> Scenario:
+    """The trial's scenario: what the simulated bench will hold (effects, strengths, specimens of each layer
+    count; the effects and the 2-layer specimens are drawn as without the other layer counts)."""
     from sim_devices.scenarios import draw_scenario
 
     return draw_scenario(seed, null_fraction=null_fraction, decoy_fraction=decoy_fraction, n_specimens=specimens,
-                         fixtures=("actuator",), pool=_draw_pool())
+                         fixtures=("actuator",), pool=_draw_pool(), layers=_reference_layers(layer_counts),
+                         layer_counts=tuple(layer_counts))
+
+
+def _reference_layers(layer_counts: tuple[int, ...]) -> int:
+    """The layer count the effects' strengths refer to: 2 where the trial builds it, else its first."""
+    return 2 if 2 in layer_counts else layer_counts[0]
 
 
 def trial_recordings(sc: Scenario, seed: int, root: Path) -> list[Path]:
     """The trial as another lab's data: each specimen recorded on the simulated bench, exported as trace CSVs and
     imported as a user would (`hamr-bench import trace`), into MCAP files under `root`."""
     from analysis.importer import import_trace
-    from sim_devices.trace_export import export_actuator_traces, record_specimens
+    from sim_devices.trace_export import export_actuator_traces, exported_layers, record_specimens
 
     runs = record_specimens(sc, root / "runs", set_options=TRIAL_OPTIONS, seed=seed)
     paths = []
     for csv_path in export_actuator_traces(sc, root / "csv", recordings=runs):
         out = root / "imported" / (csv_path.stem + ".mcap")
         out.parent.mkdir(exist_ok=True)
-        import_trace(csv_path, out, "actuator", layers=sc.layers)
+        import_trace(csv_path, out, "actuator", layers=exported_layers(csv_path))
         paths.append(out)
     return paths
 
 
 def run_trial(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-              specimens: int = TRIAL_SPECIMENS) -> Trial:
+              specimens: int = TRIAL_SPECIMENS, layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> Trial:
     from analysis.gap.diagnose import diagnose
     from analysis.gap.features import load_gap_data
 
-    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens)
+    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens, layer_counts)
     with tempfile.TemporaryDirectory(prefix="hamr-selfcheck-") as tmp:
         t0 = time.perf_counter()
         paths = trial_recordings(sc, seed, Path(tmp))
@@ -228,83 +234,89 @@ def score(trials: list[Trial]) -> dict[str, Any]:
 
 
 def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-                specimens: int = TRIAL_SPECIMENS) -> dict[str, float]:
+                specimens: int = TRIAL_SPECIMENS, layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> dict[str, float]:
     """For each hidden effect that acts on a trial's actuators as a change of their common gains (a fabrication
     shift; a series spring, to first order), how far it moves the mean of its specimens' gains in units of the
     tolerance prior's spread of that mean (sqrt(n) x the Mahalanobis length of the (log stroke, log stiffness)
-    change): the best any method that allows the tolerances can do. Below `DETECTION_SIGMAS` such an effect
-    looks like specimen scatter. A spring's change is its blocked-force loss at 250 V (free stroke unchanged);
-    a hardening spring's loss differs across voltages, which a method could still see: for springs the limit is
-    that of the linear part. Recomputed from the trial's seed (no simulation), so a raw file of an earlier run
-    can be scored too."""
-    from analysis.gap import tolerances as tol
-    from analysis.gap.families import FABRICATION
-    from hamr_bench.model import actuator as act
-    from hamr_bench.model import actuator_preset
+    change; over several layer counts, the root of the summed squares): the best any method that allows the
+    tolerances can do. Below the design's level (`design_study.Design.threshold_sigmas`; `DETECTION_SIGMAS` on
+    one layer count) such an effect looks like specimen scatter. A spring's change is its blocked-force loss at
+    250 V (free stroke unchanged); a hardening spring's loss differs across voltages, which a method could still
+    see: for springs the limit is that of the linear part. Recomputed from the trial's seed (no simulation), so a
+    raw file of an earlier run can be scored too (`design_study.effect_sigmas`)."""
+    from analysis.gap.design_study import Design, effect_sigmas
 
-    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens)
-    a = actuator_preset(sc.layers, sc.params_set)
-    w = tol.whitening(a)
-    n = len(sc.specimens)
+    sc = draw_trial(seed, null_fraction, decoy_fraction, specimens, layer_counts)
+    design = Design(sc.layer_counts, specimens)
     out = {}
     for e in sc.effects:
         if e.decoy or not e.library_name or e.library_strength is None:
             continue
-        name, strength = e.library_name, float(e.library_strength)
-        if name in FABRICATION:
-            out[name] = tol.common_shift_sigmas(a, w, n, name, strength)
-        elif name in ("sensor_compliance", "base_compliance"):
-            ck = strength * act.stiffness_N_per_m(a)
-            loss = ck / (1.0 + ck) if name == "sensor_compliance" else e.observable["blocked_force_loss_250V"]
-            out[name] = math.sqrt(n) * float(np.linalg.norm(w @ np.array([0.0, math.log1p(-loss)])))
+        strength = e.strength if e.name == "base_compliance" else float(e.library_strength)
+        sig = effect_sigmas(e.library_name, strength, e.shape, design)
+        if sig is not None:
+            out[e.library_name] = sig
     return out
 
 
 def realised_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-                    specimens: int = TRIAL_SPECIMENS) -> float:
+                    specimens: int = TRIAL_SPECIMENS, layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> float:
     """How far the trial's specimens, as built (each its own fabrication scatter, with every hidden effect on the
     gains applied by the bench's own forms), sit from the presets as a population: sqrt(n) x the Mahalanobis
-    length of their mean (log stroke, log stiffness) change under the diagnosis's tolerance prior. It is what the
-    population test sees with the gains known exactly, so below `DETECTION_SIGMAS` no method that allows the
-    tolerances can tell these specimens from scatter, whatever the drawn strength (`gain_sigmas`) promised: the
-    scatter of a few specimens can cancel part of a shift or add to it."""
-    return built_sigmas(draw_trial(seed, null_fraction, decoy_fraction, specimens))
+    length of their mean (log stroke, log stiffness) change under the diagnosis's tolerance prior, per layer
+    count (the root of the summed squares over several). It is what the population test sees with the gains known
+    exactly, so below the design's level no method that allows the tolerances can tell these specimens from
+    scatter, whatever the drawn strength (`gain_sigmas`) promised: the scatter of a few specimens can cancel part
+    of a shift or add to it."""
+    return built_sigmas(draw_trial(seed, null_fraction, decoy_fraction, specimens, layer_counts))
 
 
 def built_sigmas(sc: Scenario) -> float:
     """`realised_sigmas` of one drawn scenario."""
     from analysis.gap import tolerances as tol
+    from analysis.gap.design_study import _spring_loss
     from hamr_bench.model import actuator as act
     from hamr_bench.model import actuator_preset
     from sim_devices.bench_effects import MODEL_HOOKS
 
-    preset = actuator_preset(sc.layers, sc.params_set)
-    changes = []
-    for spec in sc.specimens:
-        a = act.with_changes(preset, **spec.actuator)
-        spring_loss = 0.0
-        for e in sc.effects:    # a design-side hook (a flexure decoy) leaves the plate as it is
-            if e.name in MODEL_HOOKS:
-                a = MODEL_HOOKS[e.name](strength=e.strength).actuator_params(a)
-        for e in sc.effects:    # a series spring after the plate: its share of the tip's deflection is lost
-            if e.name == "sensor_compliance":
-                ck = float(e.strength) * act.stiffness_N_per_m(a)
-                spring_loss = 1.0 - (1.0 - spring_loss) / (1.0 + ck)
-            elif e.name == "base_compliance":
-                spring_loss = 1.0 - (1.0 - spring_loss) * (1.0 - e.observable["blocked_force_loss_250V"])
-        changes.append(tol.log_outputs(a) - tol.log_outputs(preset) + np.array([0.0, math.log1p(-spring_loss)]))
-    mean = np.mean(changes, axis=0)
-    return math.sqrt(len(changes)) * float(np.linalg.norm(tol.whitening(preset) @ mean))
+    total = 0.0
+    for layers in sc.layer_counts:
+        preset = actuator_preset(layers, sc.params_set)
+        changes = []
+        for spec in sc.specimens:
+            if spec.layers != layers:
+                continue
+            a = act.with_changes(preset, **spec.actuator)
+            spring_loss = 0.0
+            for e in sc.effects:    # a design-side hook (a flexure decoy) leaves the plate as it is
+                if e.name in MODEL_HOOKS:
+                    a = MODEL_HOOKS[e.name](strength=e.strength).actuator_params(a)
+            for e in sc.effects:    # a series spring after the plate: its share of the tip's deflection is lost
+                if e.name == "sensor_compliance":
+                    ck = float(e.strength) * act.stiffness_N_per_m(a)
+                    spring_loss = 1.0 - (1.0 - spring_loss) / (1.0 + ck)
+                elif e.name == "base_compliance":
+                    loss = e.observable["blocked_force_loss_250V"] if layers == sc.layers else \
+                        _spring_loss(e.name, e.strength, e.shape, preset)
+                    spring_loss = 1.0 - (1.0 - spring_loss) * (1.0 - loss)
+            changes.append(tol.log_outputs(a) - tol.log_outputs(preset) + np.array([0.0, math.log1p(-spring_loss)]))
+        mean = np.mean(changes, axis=0)
+        total += len(changes) * float(np.linalg.norm(tol.whitening(preset) @ mean)) ** 2
+    return math.sqrt(total)
 
 
 def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-                            specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
+                            specimens: int = TRIAL_SPECIMENS,
+                            layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> dict[str, Any]:
     """The single- and multi-effect scores split by kind of hidden effect: effects on the specimens' common gains
     (shifts and springs) above and below their detection limit (`gain_sigmas`), and every other effect. Single:
     top-1, and how often the truth was inside a set the diagnosis named as one it cannot separate; multi: each
     hidden effect named (attributed or ambiguous) or inside a named set. The single trials on the gains are split
-    a second time by the specimens as built (`realised_sigmas`). The fractions and specimens must be the run's
-    (they set the draw)."""
+    a second time by the specimens as built (`realised_sigmas`). The fractions, specimens and layer counts must
+    be the run's (they set the draw)."""
+    from analysis.gap.design_study import Design
+
+    level = Design(tuple(layer_counts), specimens).threshold_sigmas
     kinds = ("gain_above_limit", "gain_below_limit", "other")
     single = {k: [0, 0, 0] for k in kinds}
     multi = {k: [0, 0, 0] for k in kinds}
@@ -312,29 +324,29 @@ def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, de
     for t in trials:
         if t.kind not in ("single", "multi"):
             continue
-        sigmas = gain_sigmas(t.seed, null_fraction, decoy_fraction, specimens)
+        sigmas = gain_sigmas(t.seed, null_fraction, decoy_fraction, specimens, layer_counts)
         if t.kind == "single" and t.truth[0] in sigmas:
-            built = realised_sigmas(t.seed, null_fraction, decoy_fraction, specimens)
-            row = realised["above_limit" if built >= DETECTION_SIGMAS else "below_limit"]
+            built = realised_sigmas(t.seed, null_fraction, decoy_fraction, specimens, layer_counts)
+            row = realised["above_limit" if built >= level else "below_limit"]
             row[0] += t.best == t.truth[0]
             row[1] += t.best != t.truth[0] and _in_ambiguous_set(t, t.truth[0])
             row[2] += 1
         for n in t.truth[:1] if t.kind == "single" else t.truth:
             sig = sigmas.get(n)
-            key = "other" if sig is None else ("gain_above_limit" if sig >= DETECTION_SIGMAS else "gain_below_limit")
+            key = "other" if sig is None else ("gain_above_limit" if sig >= level else "gain_below_limit")
             named = _named_at_a_step(t, n)
             row = single[key] if t.kind == "single" else multi[key]
             row[0] += t.best == n if t.kind == "single" else named
             row[1] += (t.best != n if t.kind == "single" else not named) and _in_ambiguous_set(t, n)
             row[2] += 1
-    return {"detection_sigmas": DETECTION_SIGMAS,
+    return {"detection_sigmas": level,
             "top1_single": {k: {"right": v[0], "in_set": v[1], "of": v[2]} for k, v in single.items()},
             # the single trials on the gains again, split by the specimens as built (`realised_sigmas`)
             "top1_single_gain_as_built": {k: {"right": v[0], "in_set": v[1], "of": v[2]} for k, v in realised.items()},
             "multi_named": {k: {"named": v[0], "in_set_only": v[1], "of": v[2]} for k, v in multi.items()}}
 
 
-def _trial_worker(args: tuple[int, float, float, int]) -> Trial | str:
+def _trial_worker(args: tuple[int, float, float, int, tuple[int, ...]]) -> Trial | str:
     """One trial; a trial that crashes is reported by its seed and error (counted, never scored)."""
     try:
         return run_trial(*args)
@@ -343,9 +355,9 @@ def _trial_worker(args: tuple[int, float, float, int]) -> Trial | str:
 
 
 def score_raw(raw_path: str | Path, null_fraction: float = 0.15, decoy_fraction: float = 0.1,
-              specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
-    """Score the trials of a raw file (`selfcheck(raw_path=...)`), e.g. of a run stopped part way (the fractions
-    and specimens of that run, for the detectability breakdown)."""
+              specimens: int = TRIAL_SPECIMENS, layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> dict[str, Any]:
+    """Score the trials of a raw file (`selfcheck(raw_path=...)`), e.g. of a run stopped part way (the fractions,
+    specimens and layer counts of that run, for the detectability breakdown)."""
     trials, errors = [], []
     for line in Path(raw_path).read_text(encoding="utf-8").splitlines():
         item = json.loads(line)
@@ -355,11 +367,11 @@ def score_raw(raw_path: str | Path, null_fraction: float = 0.15, decoy_fraction:
             trials.append(Trial(**item))
     out = score(trials)
     out["errors"] = errors
-    out["detectability"] = detectability_breakdown(trials, null_fraction, decoy_fraction, specimens)
+    out["detectability"] = detectability_breakdown(trials, null_fraction, decoy_fraction, specimens, layer_counts)
     return out
 
 
-def _run_trials(args: list[tuple[int, float, float, int]], jobs: int, scheduler: Any,
+def _run_trials(args: list[tuple[int, float, float, int, tuple[int, ...]]], jobs: int, scheduler: Any,
                 take: Callable[[Trial | str], None]) -> None:
     """Each trial's result to `take` as it ends: in this process, in local processes, or on a Dask cluster."""
     if jobs <= 1 and scheduler is None:
@@ -383,10 +395,13 @@ def _run_trials(args: list[tuple[int, float, float, int]], jobs: int, scheduler:
 
 def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: float = 0.15,
               decoy_fraction: float = 0.1, progress: bool = False, raw_path: str | None = None,
-              scheduler: Any = None, specimens: int = TRIAL_SPECIMENS) -> dict[str, Any]:
-    """Blind trials, scored. `jobs` local processes, or `scheduler` a Dask cluster (analysis.parallel)."""
+              scheduler: Any = None, specimens: int = TRIAL_SPECIMENS,
+              layer_counts: tuple[int, ...] = TRIAL_LAYERS) -> dict[str, Any]:
+    """Blind trials, scored. `jobs` local processes, or `scheduler` a Dask cluster (analysis.parallel);
+    `specimens` of each of `layer_counts` a trial."""
     seeds = [seed * 100_000 + i for i in range(trials)]
-    args = [(s, null_fraction, decoy_fraction, specimens) for s in seeds]
+    layer_counts = tuple(layer_counts)
+    args = [(s, null_fraction, decoy_fraction, specimens, layer_counts) for s in seeds]
     done: list[Trial] = []
     errors: list[str] = []
     if raw_path is not None:
@@ -408,8 +423,9 @@ def selfcheck(trials: int = 20, seed: int = 0, jobs: int = 1, null_fraction: flo
     _run_trials(args, jobs, scheduler, take)
     out = score(done)
     out["errors"] = errors
-    out["detectability"] = detectability_breakdown(done, null_fraction, decoy_fraction, specimens)
+    out["detectability"] = detectability_breakdown(done, null_fraction, decoy_fraction, specimens, layer_counts)
     out["seed"] = seed
+    out["design"] = {"layer_counts": list(layer_counts), "specimens_per_layer_count": specimens}
     out["excluded_from_draw"] = dict(EXCLUDED_FROM_DRAW)
     out["per_trial"] = [t.to_json() for t in done]
     return out

@@ -12,23 +12,41 @@ from analysis.gap.design_study import Design, _spring_loss, design_shares, effec
 SEEDS = range(205600000, 205600060)
 
 
-def test_on_the_drawn_design_it_is_the_self_checks_own_detection_measure():
-    """The self-check's design (three specimens of the 2-layer actuator) gives `selfcheck.gain_sigmas` for every
-    hidden shift and spring, and its level is the diagnosis's DETECTION_SIGMAS."""
+def test_on_the_drawn_design_it_is_the_common_shift_measure_of_one_layer_count():
+    """The self-check's design (three specimens of the 2-layer actuator): a fabrication shift's distance is the
+    tolerances' common-shift measure, a sensor spring's and a clamp's that of the blocked-force loss the draw
+    records, and the level is the diagnosis's DETECTION_SIGMAS."""
+    import numpy as np
+
+    from analysis.gap import tolerances as tol
     from analysis.gap.diagnose import DETECTION_SIGMAS
-    from analysis.gap.selfcheck import draw_trial, gain_sigmas
+    from analysis.gap.families import FABRICATION
+    from analysis.gap.selfcheck import draw_trial
+    from hamr_bench.model import actuator as act
+    from hamr_bench.model import actuator_preset
 
     drawn = Design((2,), 3)
     assert drawn.threshold_sigmas == pytest.approx(DETECTION_SIGMAS, rel=1e-12)
+    a = actuator_preset(2, "effective")
+    w = tol.whitening(a)
     compared = 0
     for seed in SEEDS:
-        expected = gain_sigmas(seed)
         for e in draw_trial(seed).effects:
-            if e.library_name in expected:
-                strength = e.strength if e.name == "base_compliance" else e.library_strength
-                assert effect_sigmas(e.library_name, strength, e.shape, drawn) == \
-                    pytest.approx(expected[e.library_name], rel=1e-9), (seed, e.name)
-                compared += 1
+            name = e.library_name
+            if e.decoy or name is None or e.library_strength is None:
+                continue
+            if name in FABRICATION:
+                expected = tol.common_shift_sigmas(a, w, 3, name, e.library_strength)
+            elif name in ("sensor_compliance", "base_compliance"):
+                ck = e.library_strength * act.stiffness_N_per_m(a)
+                loss = ck / (1 + ck) if name == "sensor_compliance" else e.observable["blocked_force_loss_250V"]
+                expected = math.sqrt(3) * float(np.linalg.norm(w @ np.array([0.0, math.log1p(-loss)])))
+            else:
+                assert effect_sigmas(name, 0.1, e.shape, drawn) is None
+                continue
+            strength = e.strength if e.name == "base_compliance" else e.library_strength
+            assert effect_sigmas(name, strength, e.shape, drawn) == pytest.approx(expected, rel=1e-9), (seed, name)
+            compared += 1
     assert compared >= 20
 
 

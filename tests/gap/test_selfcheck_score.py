@@ -83,7 +83,8 @@ def test_an_ambiguous_best_counts_as_an_answer_right_or_wrong():
 
 
 def test_detectability_splits_by_how_far_a_hidden_effect_moves_the_specimens_mean_gains():
-    from analysis.gap.selfcheck import DETECTION_SIGMAS, _draw_pool, detectability_breakdown, gain_sigmas
+    from analysis.gap.diagnose import DETECTION_SIGMAS
+    from analysis.gap.selfcheck import _draw_pool, detectability_breakdown, gain_sigmas
     from sim_devices.scenarios import draw_scenario
 
     # find single-effect draws of a weak sensor spring, a strong base spring and a creep (no simulation)
