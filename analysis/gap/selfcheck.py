@@ -6,8 +6,8 @@ lists them side by side), decoys outside the library, nulls, and several specime
 within fabrication tolerances, so the nominal model is off from the truth as on a real rig. Each specimen runs the
 actuator protocol through the real drivers against the emulators; the runs are written as another lab's CSV files
 (`sim_devices.trace_export`: one file per test x layer count x V_bias, the specimens one after another, the
-project's commanded timelines dropped), imported with the documented importer and diagnosed from the imported recordings alone. The
-diagnosis is never told the effect, its strength or the specimens' parameters.
+project's commanded timelines dropped), imported with the documented importer and diagnosed from the imported
+recordings alone. The diagnosis is never told the effect, its strength or the specimens' parameters.
 
 Scores (`score`): top-1 on single-effect trials, every effect named on multi-effect trials, false attributions on
 nulls, decoys left unexplained, and interval coverage of the truth's strength where the generator's and the
