@@ -115,7 +115,7 @@ def _spring_loss(name: str, strength: float, shape: dict[str, float], a: Actuato
     return 1.0 - f / (k * u)
 
 
-def _gain_strength(e: EffectTruth) -> float | None:
+def gain_strength(e: EffectTruth) -> float | None:
     """The strength `effect_sigmas` reads: the generator's own for a clamp (its form is rebuilt per actuator),
     the candidate's unit otherwise (None where the units differ: not a change of the gains)."""
     return e.strength if e.name == "base_compliance" else e.library_strength
@@ -137,7 +137,7 @@ def design_shares(seeds: Sequence[int], designs: Sequence[Design], null_fraction
             c = counts[d]
             offset = 0 if sc.kind == "single" else 3
             for e in hidden[:1] if sc.kind == "single" else hidden:
-                strength = _gain_strength(e)
+                strength = gain_strength(e)
                 sig = None if strength is None else effect_sigmas(str(e.library_name), strength, e.shape, d)
                 c[offset] += 1
                 c[offset + 1] += sig is not None

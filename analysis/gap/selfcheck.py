@@ -244,15 +244,15 @@ def gain_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: float = 
     250 V (free stroke unchanged); a hardening spring's loss differs across voltages, which a method could still
     see: for springs the limit is that of the linear part. Recomputed from the trial's seed (no simulation), so a
     raw file of an earlier run can be scored too (`design_study.effect_sigmas`)."""
-    from analysis.gap.design_study import Design, effect_sigmas
+    from analysis.gap.design_study import Design, effect_sigmas, gain_strength
 
     sc = draw_trial(seed, null_fraction, decoy_fraction, specimens, layer_counts)
     design = Design(sc.layer_counts, specimens)
     out = {}
     for e in sc.effects:
-        if e.decoy or not e.library_name or e.library_strength is None:
+        strength = gain_strength(e)
+        if e.decoy or not e.library_name or strength is None:
             continue
-        strength = e.strength if e.name == "base_compliance" else float(e.library_strength)
         sig = effect_sigmas(e.library_name, strength, e.shape, design)
         if sig is not None:
             out[e.library_name] = sig
