@@ -6,13 +6,13 @@ The drive path, on a uniform grid of DENSE_DT_S:
 
     plate voltages V_drive, V_bias - V_drive -> each plate's hysteresis -> x its d31(E) gain -> net drive -> creep
 
-(hysteresis and the gain once per drive segment, the stretch of grid cells over which every plate's voltage
-holds; creep on the grid itself), read at the sensor's sample times (minus the sensor chain's lag) as the drive
-was played: the command's staircase itself (`timebase.Staircase`, averaged over the amplifier's settling, or over
-one step ahead for an inferred drive), plus what the drive effects change on the grid. Then the quasi-static
-model: the bare actuator's closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series
-springs, clipped at 0 for a sensor that reads only push) or the powertrain (leg). The force baseline (drift) is added linearly by `Problem`.
-Strength 0 of every candidate is the nominal model exactly (the same path, the operators skipped)."""
+(hysteresis and the gain once per drive segment, the stretch of grid cells over which every plate's voltage holds;
+creep on the grid itself), read at the sensor's sample times (minus the sensor chain's lag) as the drive was played:
+the command's staircase itself (`timebase.Staircase`, averaged over the amplifier's settling, or over one step ahead
+for an inferred drive), plus what the drive effects change on the grid. Then the quasi-static model: the bare
+actuator's closed form (free stroke (c/k) p; blocked force c p + k x pushing through the series springs, clipped at
+0 for a sensor that reads only push) or the powertrain (leg). The force baseline (drift) is added linearly by
+`Problem`. Strength 0 of every candidate is the nominal model exactly (the same path, the operators skipped)."""
 
 from __future__ import annotations
 
