@@ -93,13 +93,13 @@ def effect_sigmas(name: str, strength: float, shape: dict[str, float], design: D
         if name in FABRICATION:
             sig = tol.common_shift_sigmas(a, w, design.specimens, name, strength)
         else:
-            loss = _spring_loss(name, strength, shape, a)
+            loss = spring_loss(name, strength, shape, a)
             sig = math.sqrt(design.specimens) * float(np.linalg.norm(w @ np.array([0.0, math.log1p(-loss)])))
         total += sig * sig
     return math.sqrt(total)
 
 
-def _spring_loss(name: str, strength: float, shape: dict[str, float], a: ActuatorParams) -> float:
+def spring_loss(name: str, strength: float, shape: dict[str, float], a: ActuatorParams) -> float:
     """The blocked-force loss at 250 V a series spring causes on actuator `a` (its share of the tip's travel)."""
     from hamr_bench.model import actuator as act
 

@@ -96,13 +96,13 @@ def _recall(cache: dict, key: Any) -> Any:
 @dataclass(frozen=True)
 class _PlateDrive:
     """One plate's drive (full scale 1) at the dense grid's samples where it changes: split at 0 V (`above` =
-    max(x, 0), `below` = x - above), its play memory there, and per dense sample the change it holds
-    (`sample_of`)."""
+    max(x, 0), `below` = x - above), its play memory there, and per drive segment the change it holds
+    (`change_of_segment`)."""
 
     above: np.ndarray
     below: np.ndarray
     memory: np.ndarray
-    sample_of: np.ndarray
+    change_of_segment: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -226,9 +226,6 @@ class RunEngine:
         self._plate_voltages: np.ndarray | None = None
         self._plate_drive: list[_PlateDrive] | None = None
         self._plate_levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
-        self._drive_segments: _DriveSegments | None = None
-        self._plates_per_segment: np.ndarray | None = None
-        self._net_per_segment: np.ndarray | None = None
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._played_net: WindowMean | None = None
@@ -285,10 +282,10 @@ class RunEngine:
             # a staircase holds few distinct voltages: the gain is computed on those (with their logs, once) and
             # spread back to the segments
             self._plate_levels = []
-            for v in self._segment_plates():
+            for v in self._segment_plates:
                 levels, where = np.unique(v, return_inverse=True)
                 self._plate_levels.append((levels, op.log_magnitude(levels), where))
-        out = np.empty((2, self._segments().start.size))
+        out = np.empty((2, self._segments.start.size))
         for row, (levels, log_v, where) in zip(out, self._plate_levels, strict=True):
             np.take(op.plate_gain(levels, t_p, d31.strength, knee, p, ref, log_v), where, out=row)
         return out
@@ -300,26 +297,24 @@ class RunEngine:
             self._plate_voltages.flags.writeable = False
         return self._plate_voltages
 
+    @cached_property
     def _segments(self) -> _DriveSegments:
-        """The dense grid's drive segments (`_DriveSegments`), built once per run."""
-        if self._drive_segments is None:
-            v = self._plates()
-            changes = np.r_[True, (v[:, 1:] != v[:, :-1]).any(axis=0) | (self.dense_vb[1:] != self.dense_vb[:-1])]
-            self._drive_segments = _DriveSegments(np.flatnonzero(changes), np.cumsum(changes) - 1)
-        return self._drive_segments
+        """The dense grid's drive segments (`_DriveSegments`)."""
+        v = self._plates()
+        changes = np.r_[True, (v[:, 1:] != v[:, :-1]).any(axis=0) | (self.dense_vb[1:] != self.dense_vb[:-1])]
+        return _DriveSegments(np.flatnonzero(changes), np.cumsum(changes) - 1)
 
+    @cached_property
     def _segment_plates(self) -> np.ndarray:
         """Each plate's voltage per drive segment (shape (2, segments), read-only)."""
-        if self._plates_per_segment is None:
-            self._plates_per_segment = self._plates()[:, self._segments().start]
-            self._plates_per_segment.flags.writeable = False
-        return self._plates_per_segment
+        out = self._plates()[:, self._segments.start]
+        out.flags.writeable = False
+        return out
 
+    @cached_property
     def _segment_net(self) -> np.ndarray:
         """The net drive as played on the dense grid (no effect), per drive segment."""
-        if self._net_per_segment is None:
-            self._net_per_segment = self._dense_net[self._segments().start]
-        return self._net_per_segment
+        return self._dense_net[self._segments.start]
 
     def _plate_drives(self) -> list[_PlateDrive]:
         """Each plate's drive on the dense grid, at its changes only, with its play memory there
@@ -334,7 +329,7 @@ class RunEngine:
                 xs = x[changes]
                 above = np.maximum(xs, 0.0)
                 self._plate_drive.append(_PlateDrive(above, xs - above, op.plate_memory(xs),
-                                                     np.cumsum(changes) - 1))
+                                                     (np.cumsum(changes) - 1)[self._segments.start]))
         return self._plate_drive
 
     @staticmethod
@@ -350,7 +345,7 @@ class RunEngine:
     def effective_drive(self, effects: Effects, t_p: float) -> np.ndarray:
         """The effective net drive on the dense grid after hysteresis, d31(E) and creep (V)."""
         y = self._effective(effects, t_p)
-        return y if _creeps(effects) else y[self._segments().of]
+        return y if _creeps(effects) else y[self._segments.of]
 
     def _drive_at(self, times: str, te: np.ndarray, lags: tuple[float, float], effects: Effects,
                   t_p: float) -> np.ndarray:
@@ -369,9 +364,9 @@ class RunEngine:
                 if places is None:
                     places = GridPlaces.of(te, float(self.dense_t[0]), DENSE_DT_S, self.dense_t.size)
                     if not dense:
-                        places = places.through(self._segments().of)
+                        places = places.through(self._segments.of)
                     _keep(self._places, (times, lags, dense), places)
-                net = self._dense_net if dense else self._segment_net()
+                net = self._dense_net if dense else self._segment_net
                 y = y + places.interp(self._effective(effects, t_p) - net)
             _keep(self._at, key, y)
         return y
@@ -390,10 +385,9 @@ class RunEngine:
     def _plate_loops(self, strength: float, gamma: float, tip: float) -> np.ndarray:
         """Each plate's voltage through its hysteresis per drive segment (shape (2, segments), V)."""
         w = op.plate_weights(strength, gamma, tip)
-        start = self._segments().start
-        out = np.empty((2, start.size))
+        out = np.empty((2, self._segments.start.size))
         for row, d in zip(out, self._plate_drives(), strict=True):
-            np.take(op.plate_hysteresis_split(d.above, d.below, d.memory, w, tip), d.sample_of[start], out=row)
+            np.take(op.plate_hysteresis_split(d.above, d.below, d.memory, w, tip), d.change_of_segment, out=row)
         out *= FULL_SCALE_V
         return out
 
@@ -405,7 +399,7 @@ class RunEngine:
         d31 = effects.get("field_dependent_d31")
         hy = effects.get("hysteresis")
         cr = effects.get("creep")
-        plates = self._segment_plates()
+        plates = self._segment_plates
         h_key = None
         if hy is not None and hy.strength != 0:
             gamma = hy.shape("density_exponent", "hysteresis")
@@ -422,7 +416,7 @@ class RunEngine:
         y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
             n = cr.shape("exponent", "creep")
-            base = y = y[self._segments().of]
+            base = y = y[self._segments.of]
             resp = self._memo(("creep", n, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n))
             y = y + cr.strength * resp
         return y

@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from sim_devices.scenarios import Scenario
+    from hamr_bench.model import ActuatorParams
+    from sim_devices.scenarios import Scenario, SpecimenTruth
 
 # The trial's actuator protocol: three voltages, two repetitions (the second at the slow ramp), four cycles a step.
 TRIAL_OPTIONS = ["voltages_V=100,175,250", "repetitions=2", "drive.cycles=4"]
@@ -274,35 +275,38 @@ def realised_sigmas(seed: int, null_fraction: float = 0.15, decoy_fraction: floa
 def built_sigmas(sc: Scenario) -> float:
     """`realised_sigmas` of one drawn scenario."""
     from analysis.gap import tolerances as tol
-    from analysis.gap.design_study import _spring_loss
-    from hamr_bench.model import actuator as act
     from hamr_bench.model import actuator_preset
-    from sim_devices.bench_effects import MODEL_HOOKS
 
     total = 0.0
     for layers in sc.layer_counts:
         preset = actuator_preset(layers, sc.params_set)
-        changes = []
-        for spec in sc.specimens:
-            if spec.layers != layers:
-                continue
-            a = act.with_changes(preset, **spec.actuator)
-            spring_loss = 0.0
-            for e in sc.effects:    # a design-side hook (a flexure decoy) leaves the plate as it is
-                if e.name in MODEL_HOOKS:
-                    a = MODEL_HOOKS[e.name](strength=e.strength).actuator_params(a)
-            for e in sc.effects:    # a series spring after the plate: its share of the tip's deflection is lost
-                if e.name == "sensor_compliance":
-                    ck = float(e.strength) * act.stiffness_N_per_m(a)
-                    spring_loss = 1.0 - (1.0 - spring_loss) / (1.0 + ck)
-                elif e.name == "base_compliance":
-                    loss = e.observable["blocked_force_loss_250V"] if layers == sc.layers else \
-                        _spring_loss(e.name, e.strength, e.shape, preset)
-                    spring_loss = 1.0 - (1.0 - spring_loss) * (1.0 - loss)
-            changes.append(tol.log_outputs(a) - tol.log_outputs(preset) + np.array([0.0, math.log1p(-spring_loss)]))
+        changes = [_built_change(sc, spec, preset, layers) for spec in sc.specimens if spec.layers == layers]
         mean = np.mean(changes, axis=0)
         total += len(changes) * float(np.linalg.norm(tol.whitening(preset) @ mean)) ** 2
     return math.sqrt(total)
+
+
+def _built_change(sc: Scenario, spec: SpecimenTruth, preset: ActuatorParams, layers: int) -> np.ndarray:
+    """One specimen's (log stroke, log stiffness) against its preset, as the bench builds it: its drawn
+    parameters, every hidden shift in the bench's own form, and the force share every series spring takes."""
+    from analysis.gap import tolerances as tol
+    from analysis.gap.design_study import spring_loss
+    from hamr_bench.model import actuator as act
+    from sim_devices.bench_effects import MODEL_HOOKS
+
+    a = act.with_changes(preset, **spec.actuator)
+    for e in sc.effects:    # a design-side hook (a flexure decoy) leaves the plate as it is
+        if e.name in MODEL_HOOKS:
+            a = MODEL_HOOKS[e.name](strength=e.strength).actuator_params(a)
+    kept = 1.0              # a series spring after the plate: its share of the tip's deflection is lost
+    for e in sc.effects:
+        if e.name == "sensor_compliance":
+            kept /= 1.0 + float(e.strength) * act.stiffness_N_per_m(a)
+        elif e.name == "base_compliance":
+            loss = e.observable["blocked_force_loss_250V"] if layers == sc.layers else \
+                spring_loss(e.name, e.strength, e.shape, preset)
+            kept *= 1.0 - loss
+    return tol.log_outputs(a) - tol.log_outputs(preset) + np.array([0.0, math.log(kept)])
 
 
 def detectability_breakdown(trials: list[Trial], null_fraction: float = 0.15, decoy_fraction: float = 0.1,

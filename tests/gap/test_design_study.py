@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from analysis.gap.design_study import Design, _spring_loss, design_shares, effect_sigmas
+from analysis.gap.design_study import Design, spring_loss, design_shares, effect_sigmas
 
 SEEDS = range(205600000, 205600060)
 
@@ -61,11 +61,11 @@ def test_a_clamp_loses_what_the_draw_says_on_each_actuator_and_a_sensor_spring_c
 
     shape = {"form": 0.0, "hardening": 1.0, "pull_ratio": 1.0}
     for n in (1, 2, 3):
-        loss = _spring_loss("base_compliance", 0.2, shape, actuator_preset(n, "effective"))
+        loss = spring_loss("base_compliance", 0.2, shape, actuator_preset(n, "effective"))
         assert loss == pytest.approx(observables("base_compliance", 0.2, shape, n)["blocked_force_loss_250V"],
                                      rel=1e-9)
     c = 5e-5
-    losses = [_spring_loss("sensor_compliance", c, {}, actuator_preset(n, "effective")) for n in (1, 2, 3)]
+    losses = [spring_loss("sensor_compliance", c, {}, actuator_preset(n, "effective")) for n in (1, 2, 3)]
     assert losses[0] < losses[1] < losses[2]
 
 

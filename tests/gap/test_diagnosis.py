@@ -169,7 +169,7 @@ def test_the_plate_loops_on_the_drive_changes_alone_are_the_loops_on_every_sampl
     from analysis.gap.engine import FULL_SCALE_V
 
     e = Problem(load_gap_data(null_lab)).engines[0]
-    loops = e._plate_loops(0.12, 0.5, 0.3)[:, e._segments().of]
+    loops = e._plate_loops(0.12, 0.5, 0.3)[:, e._segments.of]
     kept = 0
     for k, v in enumerate((e.dense_vd, e.dense_vb - e.dense_vd)):
         x = v / FULL_SCALE_V
