@@ -212,15 +212,19 @@ class RunEngine:
         # staircase step falls anywhere in a cell, and on a fast ramp a cell is several noise widths of force).
         self._bias = Staircase(*run.bias_cmd)
         self._drive = Staircase(*run.drive_cmd)
-        self.dense_vb = self._bias.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
-        self.dense_vd = self._drive.mean(self.dense_t - DENSE_DT_S / 2, DENSE_DT_S)
-        self._dense_net = 2.0 * self.dense_vd - self.dense_vb     # bottom plate - top plate, no effect
         # A sample reads the staircase averaged over [t - settle, t + ahead]. A commanded drive is played as the
         # staircase: the amplifier settles on each step (SETTLE_S). An inferred drive is a smooth ramp written as a
         # staircase of INFERRED_RAMP_DT_S steps, each at the ramp's value at its start: averaged over the step
         # ahead it reads as the ramp again (linear between the steps, no delay).
         inferred = getattr(run, "timelines", {}).get("drive") == INFERRED
         self._settle_s, self._ahead_s = (0.0, INFERRED_RAMP_DT_S) if inferred else (SETTLE_S, 0.0)
+        # Each dense cell holds the drive's mean over the cell. A commanded staircase is what was played, so its
+        # cell means are. An inferred one trails its ramp by half a step: read half a step ahead, as the samples
+        # are, or the loops and the gain would run that much behind the drive they correct.
+        cell_start = self.dense_t - DENSE_DT_S / 2 + self._ahead_s / 2
+        self.dense_vb = self._bias.mean(cell_start, DENSE_DT_S)
+        self.dense_vd = self._drive.mean(cell_start, DENSE_DT_S)
+        self._dense_net = 2.0 * self.dense_vd - self.dense_vb     # bottom plate - top plate, no effect
         self._cache: OrderedDict[Any, Any] = OrderedDict()
         self._big_keys: list[Any] = []
         self._plate_voltages: np.ndarray | None = None
@@ -601,12 +605,12 @@ class RunEngine:
 
     @cached_property
     def force_steps(self) -> list[list[int]]:
-        """This run's force rows grouped by step (one repetition, direction and mode: phase windows of the same
-        cycles), in row order."""
+        """This run's force rows grouped by step (one repetition, direction, mode and ramp rate: phase windows of
+        the same cycles), in row order."""
         steps: dict[tuple, list[int]] = {}
         for i, (r, force) in enumerate(zip(self.rows, self.is_force_row, strict=True)):
             if force:
-                steps.setdefault((r.step, r.repetition, r.direction, r.mode), []).append(i)
+                steps.setdefault((r.step, r.repetition, r.direction, r.mode, r.ramp_s), []).append(i)
         return list(steps.values())
 
     @cached_property

@@ -35,6 +35,7 @@ its `specimen` label and its `session` (the nuisance group, `analysis.sessions`)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,6 +83,9 @@ class Row:
     # own sensitivities (value / V_bias for the level, the data's slope on a ramp for the timing). Independent of
     # `se` (the data's pure error): the row's total is sqrt(se^2 + drive_se^2).
     drive_se: float = 0.0
+    # the ramp duration of this row's cycles (s; 0 for a hold): a step whose cycles were driven at two ramp rates
+    # (an imported file holding both repetitions) gives one row per rate, not their mean
+    ramp_s: float = 0.0
 
     @property
     def condition(self) -> tuple:
@@ -213,6 +217,24 @@ def reads_pull(force_N: np.ndarray) -> bool:
     return float(np.percentile(f, 1)) < -max(6.0 * noise_sigma(f), 0.05 * max(top, 0.0))
 
 
+def ramp_groups(cycles: tuple[Cycle, ...] | list[Cycle], tolerance: float = 0.1) -> list[list[int]]:
+    """The cycles' indices grouped by ramp rate: cycles whose up and down ramps are both within `tolerance` of a
+    group's first are one group, in order of first appearance. A timing lag delays a ramp by the ramp's slope times
+    the lag, rate-independent hysteresis by the same voltage at any rate: a mean over cycles of two rates reads one
+    combination of the two, and only rows per rate tell them apart."""
+    groups: list[list[int]] = []
+    for i, c in enumerate(cycles):
+        for g in groups:
+            first = cycles[g[0]]
+            if (abs(c.ramp_up_s - first.ramp_up_s) <= tolerance * first.ramp_up_s
+                    and abs(c.ramp_down_s - first.ramp_down_s) <= tolerance * first.ramp_down_s):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups
+
+
 def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors: dict[str, tuple]) -> None:
     if step.drive is None or not step.drive.cycles:
         return
@@ -220,8 +242,18 @@ def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors:
     t_s, y_s = sensors[quantity]
     if t_s.size == 0:
         return
-    tracked = step.tracked
-    cycles = step.drive.cycles
+    for group in ramp_groups(step.drive.cycles):
+        drive = dataclasses.replace(step.drive, cycles=tuple(step.drive.cycles[i] for i in group))
+        made = _cycle_rows(run, quantity, step.tracked, group, drive, base, t_s, y_s)
+        if drive.source == "inferred":
+            _drive_uncertainty(made, drive)
+
+
+def _cycle_rows(run: RunTrace, quantity: str, tracked: bool, labels: list[int], drive: DriveTiming,
+                base: dict[str, Any], t_s: np.ndarray, y_s: np.ndarray) -> dict[str, Row]:
+    """One row per phase from the given cycles of a step (`labels`: their indices in the step), appended to the
+    run's rows."""
+    cycles = drive.cycles
     windows = [cycle_windows(c) for c in cycles]
     refs = [_samples_in(t_s, *w["low_late"]) for w in windows] if tracked else None
     made: dict[str, Row] = {}
@@ -242,15 +274,15 @@ def _driven_rows(run: RunTrace, step: StepRecord, base: dict[str, Any], sensors:
             continue
         row = Row(quantity=quantity, phase=p, value=float(v.mean()), n=int(v.size),
                   eval_times_s=np.concatenate([pts[c] for c in keep]),
-                  eval_cycle=np.concatenate([np.full(pts[c].size, c) for c in keep]),
+                  eval_cycle=np.concatenate([np.full(pts[c].size, labels[c]) for c in keep]),
                   ref_times_s=None if refs is None else np.concatenate([refs[c] for c in keep]),
-                  ref_cycle=None if refs is None else np.concatenate([np.full(refs[c].size, c) for c in keep]),
-                  **base)
+                  ref_cycle=None if refs is None else np.concatenate([np.full(refs[c].size, labels[c])
+                                                                      for c in keep]),
+                  ramp_s=drive.ramp_up_s, **base)
         row._cycle_values = v  # type: ignore[attr-defined]
         run.rows.append(row)
         made[p] = row
-    if step.drive.source == "inferred":
-        _drive_uncertainty(made, step.drive)
+    return made
 
 
 def _drive_uncertainty(rows: dict[str, Row], drive: DriveTiming) -> None:

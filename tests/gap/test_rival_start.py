@@ -20,7 +20,7 @@ from benchmarks.external_lab.cases import draw_case
 from benchmarks.external_lab.generate import write_case
 from hamr_bench.cli import main
 
-CASE_SEED = 4316          # a single hysteresis; the d31 curve fits it a little better alone
+CASE_SEED = 4316          # a single hysteresis; the d31 curve fits part of it too
 
 
 @pytest.fixture(scope="module")
@@ -53,17 +53,20 @@ def hysteresis_case(tmp_path_factory):
 def test_the_rival_named_after_the_lead_is_fitted_out_of_the_leads_basin(hysteresis_case):
     r, carried = hysteresis_case
     steps = [s.added for s in r.waterfall[1:]]
-    assert steps[:2] == ["field_dependent_d31", "hysteresis"], steps
+    # both explanations are named; since each ramp rate has its own rows (2026-12-02) the hysteresis, the truth,
+    # leads and the d31 curve follows with what the loop's amplitude-dependent gain leaves (before, the order was
+    # the other way round)
+    assert set(steps[:2]) == {"field_dependent_d31", "hysteresis"}, steps
+    lead, rival = steps[:2]
+    assert r.best == "hysteresis"
     p, after_lead, joint = r.fits.problem, r.fits.steps[1], r.fits.steps[2]
-    # the hysteresis, the d31 curve's rival at the first step, got a second start at the next: its own fit
-    # there with the lead carried over
-    assert (("field_dependent_d31",), "hysteresis") in carried, carried
+    # the rival got a second start at the next step: its own fit at the first step with the lead carried over
+    assert ((lead,), rival) in carried, carried
     # and the fit kept is no worse than the one from the lead's fit alone (the grid start). Where that one stops
-    # depends on the floating point of the model's evaluation: in the d31 curve's basin at 274 or 190 on two
-    # CPUs against 161 kept (2026-11-28), out of it at 142.7 against 141.8 since the drive's reading changed
-    # (2026-11-29), so the basin itself is not asserted here
+    # depends on the floating point of the model's evaluation (in or out of the lead's basin on two CPUs), so the
+    # basin itself is not asserted here
     with threadpool_limits(limits=1):
-        from_lead = fit_added(p, after_lead, "hysteresis", None, 40)
+        from_lead = fit_added(p, after_lead, rival, None, 40)
     assert joint.objective <= from_lead.objective + 1e-6 * from_lead.objective, (joint.objective,
                                                                                    from_lead.objective)
     hyst = next(e for e in r.named if e.name == "hysteresis")
