@@ -76,3 +76,26 @@ def test_a_sample_reads_the_step_it_falls_on_whatever_the_waveforms_phase_in_the
         reads.append(played)
     for other in reads[1:]:
         assert other == pytest.approx(reads[0], abs=1e-6)
+
+
+def test_an_inferred_ramps_dense_cells_hold_the_ramp_the_samples_read():
+    """An inferred drive is its ramp written as a staircase of samples, each at the ramp's value at its start: the
+    samples read it a step ahead, so the ramp itself. The dense cells (the loops' and the gain's input) must hold
+    the same ramp: a centred cell mean of that staircase trails it by half a step (1.25 V a cell on this ramp)."""
+    t_ramp = 10.0 + np.arange(0, 0.051, 1e-3)                 # 0 -> 250 V in 50 ms, as `steps._trapezoids` writes
+    v_ramp = (t_ramp - t_ramp[0]) / 0.05 * 250.0
+    t_cmd, v_cmd = np.r_[t_ramp, 10.2], np.r_[v_ramp, 250.0]
+    samples = 10.0 + 0.3e-3 + np.arange(0, 0.06, 2e-3)
+    row = SimpleNamespace(quantity="force_N", eval_times_s=samples, eval_cycle=None, ref_times_s=None,
+                          ref_cycle=None)
+    bias = (np.array([9.0]), np.array([250.0]))
+    run = SimpleNamespace(rows=[row], layers=2, params_set="effective", fixture="actuator", design=None,
+                          bias_cmd=bias, drive_cmd=(t_cmd, v_cmd), force_reads_pull=False,
+                          timelines={"drive": "inferred"})
+    engine = RunEngine(run)
+    on_ramp = (engine.dense_t > 10.002) & (engine.dense_t < 10.048)
+    ramp = (engine.dense_t[on_ramp] - 10.0) / 0.05 * 250.0
+    assert engine.dense_vd[on_ramp] == pytest.approx(ramp, abs=1e-6)
+    # and what a sample reads at those times is the same ramp (net drive 2 V_drive - V_bias)
+    read = engine._played_at("dense", engine.dense_t[on_ramp], (0.0, 0.0))
+    assert read == pytest.approx(2.0 * ramp - 250.0, abs=1e-6)
