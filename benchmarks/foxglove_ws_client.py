@@ -55,6 +55,7 @@ class FoxgloveClient:
         self.received: list[Received] = []
         self.counts: dict[str, int] = {}
         self.errors: list[str] = []
+        self.statuses: list[str] = []  # the server's status messages ("level: message"), e.g. a refused subscription
         self._subscriptions: dict[int, int] = {}  # subscription id -> channel id
         self._replies: dict[int, tuple[str, Any]] = {}
         self._next_call = 1
@@ -168,6 +169,8 @@ class FoxgloveClient:
                 self.services[s["name"]] = s["id"]
         elif op == "serviceCallFailure":
             self._replies[body["callId"]] = ("failure", body.get("message", ""))
+        elif op == "status":
+            self.statuses.append(f"{body.get('level')}: {body.get('message', '')}")
 
     def _advertised(self, ws: Any, body: dict[str, Any]) -> None:
         """New channels: learn them, subscribe to the wanted ones."""

@@ -104,11 +104,13 @@ def test_every_stream_reaches_a_client_with_the_files_schema_while_the_run_goes_
     # A stream reaches the client only after it has subscribed to it, and whole frames at most a few times per WALL
     # second; a simulated run is ~10x faster than real time, so on a loaded machine the camera steps (four
     # repetitions, ~5 s wall) can end before the subscriptions arrive. Such a run is watched again, up to three times.
-    attempts = []  # per attempt, what reached the client by topic (said if the last attempt fails too)
+    # per attempt, what reached the client by topic and what the server said (shown if the last attempt fails too)
+    attempts = []
     for attempt in range(3):
         run, client, code, err, ended_ns = _watch(tmp_path / f"fd{attempt}.mcap")
         reached = {m.topic for m in client.received}
-        attempts.append(dict(sorted(client.counts.items())) | {"errors": client.errors})
+        attempts.append(dict(sorted(client.counts.items())) | {"errors": client.errors,
+                                                                "server_status": client.statuses[:5]})
         if code != 0 or all(t in reached for t, i in RecordingReader(run.out).topics().items() if i.message_count):
             break
     assert code == 0, err
