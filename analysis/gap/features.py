@@ -14,7 +14,8 @@ phase_labels`' phases:
 the ramp)
 
 and an undriven step (the leg's static test, the actuator's stiffness sweep) into one `hold` window. A row is
-the mean of the sensor over its window, averaged over the step's cycles; its standard error comes from the
+the mean of the sensor over its window, averaged over the step's cycles of one ramp rate (`ramp_groups`: a step
+driven at two rates gives a row per rate); its standard error comes from the
 cycle-to-cycle scatter pooled over the run's steps of that phase (pure error), then moderated toward the other
 runs' of that window kind (`moderation`). Camera rows are relative to the
 same cycle's low_late window (the camera has no absolute zero).
