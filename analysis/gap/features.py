@@ -56,6 +56,9 @@ from hamr_bench.recording.steps import (Block, DriveTiming, ParsedRun, StepRecor
                                         parse_run, sorted_stream)
 
 PHASES = ("low_late", "rise_mid", "rise", "high_early", "high_late", "fall", "fall_mid")
+# Ramps within this fraction of each other are one ramp rate (the rows per rate here, the rates counted by
+# `problem.Problem`): an inferred ramp's length carries the monitor's timing noise
+RAMP_RATE_TOLERANCE = 0.1
 
 
 @dataclass
@@ -218,7 +221,8 @@ def reads_pull(force_N: np.ndarray) -> bool:
     return float(np.percentile(f, 1)) < -max(6.0 * noise_sigma(f), 0.05 * max(top, 0.0))
 
 
-def ramp_groups(cycles: tuple[Cycle, ...] | list[Cycle], tolerance: float = 0.1) -> list[list[int]]:
+def ramp_groups(cycles: tuple[Cycle, ...] | list[Cycle], tolerance: float = RAMP_RATE_TOLERANCE
+                ) -> list[list[int]]:
     """The cycles' indices grouped by ramp rate: cycles whose up and down ramps are both within `tolerance` of a
     group's first are one group, in order of first appearance. A timing lag delays a ramp by the ramp's slope times
     the lag, rate-independent hysteresis by the same voltage at any rate: a mean over cycles of two rates reads one

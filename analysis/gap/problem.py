@@ -26,7 +26,7 @@ from scipy.sparse import coo_matrix
 from analysis.gap import tolerances as tol
 from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, drift_wander
 from analysis.gap.families import FAMILIES
-from analysis.gap.features import GapData
+from analysis.gap.features import RAMP_RATE_TOLERANCE, GapData
 
 # Effects that read the field across a plate: with one of them, the plate thickness of each specimen of a batch is
 # fitted (under its tolerance): it sets where its voltage lands on the curve, which a sharp change in field shows
@@ -235,7 +235,7 @@ class Problem:
                 cycles = getattr(timing, "cycles", None) or [timing]
                 for c in cycles:
                     r = float(getattr(c, "ramp_up_s", 0.0) or 0.0)
-                    if r > 0 and not any(abs(r - x) <= 0.1 * x for x in out):
+                    if r > 0 and not any(abs(r - x) <= RAMP_RATE_TOLERANCE * x for x in out):
                         out.append(r)
         return sorted(out)
 
