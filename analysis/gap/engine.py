@@ -218,6 +218,11 @@ class RunEngine:
         # ahead it reads as the ramp again (linear between the steps, no delay).
         inferred = getattr(run, "timelines", {}).get("drive") == INFERRED
         self._settle_s, self._ahead_s = (0.0, INFERRED_RAMP_DT_S) if inferred else (SETTLE_S, 0.0)
+        # A camera frame is exposed over an interval around its time, longer than a command step: it sees the
+        # played steps averaged, not the step in force at its mid-time as a sampled sensor does. A played
+        # staircase is read for a frame over one command step centred on it (the smooth ramp through the
+        # steps); an inferred drive is that ramp already.
+        self._frame_s = 0.0 if inferred else command_step_s(td)
         # Each dense cell holds the drive's mean over the cell. A commanded staircase is what was played, so its
         # cell means are. An inferred one trails its ramp by half a step: read half a step ahead, as the samples
         # are, or the loops and the gain would run that much behind the drive they correct.
@@ -233,6 +238,7 @@ class RunEngine:
         self._at: dict[tuple, np.ndarray] = {}
         self._played: dict[tuple, np.ndarray] = {}
         self._played_net: WindowMean | None = None
+        self._played_frames: WindowMean | None = None
         self._places: dict[tuple, GridPlaces] = {}
         self._stage_at: dict[tuple, np.ndarray] = {}
         self._used_levels: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
@@ -376,13 +382,19 @@ class RunEngine:
         return y
 
     def _played_at(self, times: str, te: np.ndarray, lags: tuple[float, float]) -> np.ndarray:
-        """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times."""
+        """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times (a camera
+        frame's over the command step around it)."""
         y = _recall(self._played, (times, lags))
         if y is None:
             if self._played_net is None:
                 self._played_net = WindowMean([(2.0, self._drive), (-1.0, self._bias)],
                                                self._settle_s + self._ahead_s)
             y = self._played_net(te - self._settle_s)
+            frames = {"t": ~self.eval_is_force, "rt": np.ones(te.size, bool)}.get(times, np.zeros(te.size, bool))
+            if self._frame_s > 0.0 and frames.any():
+                if self._played_frames is None:
+                    self._played_frames = WindowMean([(2.0, self._drive), (-1.0, self._bias)], self._frame_s)
+                y[frames] = self._played_frames(te[frames] - self._frame_s / 2)
             _keep(self._played, (times, lags), y)
         return y
 
@@ -623,6 +635,13 @@ class RunEngine:
 
     def has_contact(self) -> bool:
         return bool(self.is_force_row.any()) and self.run.t_contact_s is not None
+
+
+def command_step_s(t_cmd: np.ndarray) -> float:
+    """A staircase's step (s): the median spacing of its samples, 0 without two."""
+    d = np.diff(t_cmd)
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 0.0
 
 
 def drift_knot_s(t0_s: float, t1_s: float, knot_s: float = 4.0) -> float:

@@ -93,8 +93,9 @@ def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray
             for j in prior_rows.get(c, []):
                 train[n + j] = False
         scale = scales[keep_cols]
-        step, *_ = np.linalg.lstsq(fit.jac[np.ix_(train, keep_cols)] * scale, -fit.residual[train], rcond=1e-10)
-        step *= scale
+        u, sv, vt = np.linalg.svd(fit.jac[np.ix_(train, keep_cols)] * scale, full_matrices=False)
+        kept = determined(sv)
+        step = -(vt[kept].T / sv[kept]) @ (u[:, kept].T @ fit.residual[train]) * scale
         x0 = fit.x.copy()
         x0[cols] = 0.0
         z_pop = (p.y - p.model(lay, x0)) / p.sigma
@@ -104,6 +105,15 @@ def specimen_errors(p: Problem, fit: Fit, groups: list[str]) -> tuple[np.ndarray
         spreads[rows] = np.sqrt(1.0 + np.einsum("ij,jk,ik->i", jg, cov, jg))
         out[rows] = z_pop[rows] + fit.jac[:n][np.ix_(rows, keep_cols)] @ step
     return out, spreads
+
+
+def determined(s: np.ndarray) -> np.ndarray:
+    """Which singular directions of a Jacobian (columns in the parameters' scaled units, rows in noise units) the
+    data determine: above 1e-10 of the largest (rounding), and above 1e-3, where a thousand of the parameters'
+    scales move the rows by one noise width. Below that a direction is the data's blind spot: a lag read on a
+    staircase drive whose sampled sensor sees no step within its settling moves no row, and the one row whose
+    finite difference caught a step edge would have set a step of 10^6 scales along it."""
+    return (s > 1e-10 * (s[0] if s.size else 0.0)) & (s > 1e-3)
 
 
 def heldout_errors(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
@@ -128,7 +138,7 @@ def heldout_errors(fit: Fit, fold_masks: list[np.ndarray]) -> tuple[np.ndarray, 
     for held in fold_masks:
         train = np.r_[~held, np.ones(r.size - n, bool)]
         u, s, vt = np.linalg.svd(j[train], full_matrices=False)
-        keep = s > 1e-10 * (s[0] if s.size else 0.0)
+        keep = determined(s)
         proj = vt[keep].T / s[keep]                       # V S^-1 on the kept directions
         step = -proj @ (u[:, keep].T @ r[train])
         jh = j[:n][held]

@@ -33,7 +33,7 @@ from analysis.gap.features import RAMP_RATE_TOLERANCE, GapData
 # and the two gains cannot follow.
 FIELD_EFFECTS = ("field_dependent_d31",)
 PLATE_BOUND = 0.2        # log plate thickness, +-5 tolerance sigmas
-LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06)}
+LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06), "logged": (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 # |log gain| (a factor e): beyond any tolerance, a bound for the solver only. A nominal model so far off that its
 # fit stops at it (Table I's reported values) gets the wide bound instead; every other campaign keeps the narrow
@@ -145,8 +145,9 @@ class Fit:
         number, and a direction only the tolerance prior pins (a fabrication shift against the specimens' gains,
         whose data columns are 10^4 times larger) then fell below the pseudo-inverse's cut: its variance came
         out 0 and a shift's interval 0.1 % wide. Taken on the columns in the parameters' scaled units
-        (`Layout.scales`); directions below 1e-10 of the largest singular value there are dropped, as in the
-        held-out steps."""
+        (`Layout.scales`); directions below 1e-10 of the largest singular value there are dropped (rounding). A
+        direction the data barely see is kept, with the large variance it has: the held-out steps drop those too
+        (`heldout.determined`), since a step along one is noise, but a variance along one is the honest answer."""
         if "covariance" not in self.extra:
             scale = self.layout.scales()
             _, sv, vt = np.linalg.svd(self.jac * scale, full_matrices=False)
@@ -219,7 +220,7 @@ class Problem:
     @staticmethod
     def chain_of(e: RunEngine, quantity: str) -> tuple[str, str, str]:
         source = (getattr(e.run, "timelines", {}) or {}).get("drive", "commanded")
-        return (e.run.fixture, quantity, "inferred" if source == "inferred" else "commanded")
+        return (e.run.fixture, quantity, source if source in ("inferred", "logged") else "commanded")
 
     @staticmethod
     def _quantities(e: RunEngine) -> list[str]:

@@ -1,7 +1,9 @@
 """The one step parser: a recording's `step` events as typed `StepRecord`s with their drive timing, and the run's
 command timelines (bias, drive, stage), COMMANDED where the recording holds them and INFERRED from what was
-measured where it does not (an imported trace, a recording that lost its command streams). Both the dataset
-(`analysis.dataset`) and the gap diagnosis (`analysis.gap.features`) stand on it, so a step means the same to both.
+measured where it does not (an imported trace, a recording that lost its command streams); a drive monitor that
+is exact (no noise: a logged command, held from one row to the next) is its own timeline, LOGGED, read as
+played. Both the dataset (`analysis.dataset`) and the gap diagnosis (`analysis.gap.features`) stand on it, so a
+step means the same to both.
 
 A step's kind:
 - `point`: an imported point table's step; its `measurement` event carries the values (`StepRecord.measured`);
@@ -35,7 +37,7 @@ from hamr_bench.recording.run_metadata import RunMetadata
 HOLD_SETTLE_FRACTION = 0.5     # an undriven step without a recorded hold time: the second half of its span
 INFERRED_RAMP_DT_S = 1e-3      # the inferred drive timeline samples its ramps at least this finely
 STAGE_TOLERANCE_M = 1e-6       # measured stage positions within this are one set-point
-COMMANDED, INFERRED, MEASURED, ABSENT = "commanded", "inferred", "measured", "absent"
+COMMANDED, INFERRED, LOGGED, MEASURED, ABSENT = "commanded", "inferred", "logged", "measured", "absent"
 
 
 @dataclass(frozen=True)
@@ -365,6 +367,22 @@ def _trapezoids(cycles: list[Cycle], steps: list[StepRecord]) -> tuple[np.ndarra
     return t[order], v[order]
 
 
+def _logged_staircase(reader: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """The drive column as the staircase it is, where it holds no noise (None where it does: a measured monitor).
+    A noise-free drive column is what the lab's logger says its DAQ wrote, held from row to row; the amplifier
+    played those steps, and a sensor sample saw the step in force when it was taken. Where the logger also wrote a
+    row for each sensor sample, the sensor's clock falls against the command's at a phase of its own in every
+    waveform, up to a command step late: a smooth trapezoid through the corners loses that phase, the steps keep
+    it. Each value is kept from the row where it changed (a repeat holds no news)."""
+    t, v = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
+    ok = np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size < 3 or waveform_stats(v).noise_V > 0.0:
+        return None
+    changed = np.r_[True, v[1:] != v[:-1]]
+    return t[changed], v[changed]
+
+
 def _setpoints(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Measured stage positions -> set-points: a new one where the position moves by more than the tolerance."""
     keep = []
@@ -384,7 +402,9 @@ def _timelines(reader: Any, steps: list[StepRecord], monitor_cycles: list[Cycle]
     if commanded:
         sources["drive"] = COMMANDED
     elif monitor_cycles:
-        drive, sources["drive"] = _trapezoids(monitor_cycles, steps), INFERRED
+        logged = _logged_staircase(reader)
+        drive, sources["drive"] = (logged, LOGGED) if logged is not None else \
+            (_trapezoids(monitor_cycles, steps), INFERRED)
     else:
         drive, sources["drive"] = empty, ABSENT
     bias = _stream(reader, Topic.BIAS_COMMAND, "voltage_V")
