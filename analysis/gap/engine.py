@@ -381,19 +381,22 @@ class RunEngine:
             _keep(self._at, key, y)
         return y
 
+    def _net_window(self, width_s: float) -> WindowMean:
+        """The net drive (2 x drive - bias: bottom plate - top plate) averaged over windows of `width_s`."""
+        return WindowMean([(2.0, self._drive), (-1.0, self._bias)], width_s)
+
     def _played_at(self, times: str, te: np.ndarray, lags: tuple[float, float]) -> np.ndarray:
         """The net drive as played (bottom plate - top plate, no effect) at the lagged sample times (a camera
         frame's over the command step around it)."""
         y = _recall(self._played, (times, lags))
         if y is None:
             if self._played_net is None:
-                self._played_net = WindowMean([(2.0, self._drive), (-1.0, self._bias)],
-                                               self._settle_s + self._ahead_s)
+                self._played_net = self._net_window(self._settle_s + self._ahead_s)
             y = self._played_net(te - self._settle_s)
             frames = {"t": ~self.eval_is_force, "rt": np.ones(te.size, bool)}.get(times, np.zeros(te.size, bool))
             if self._frame_s > 0.0 and frames.any():
                 if self._played_frames is None:
-                    self._played_frames = WindowMean([(2.0, self._drive), (-1.0, self._bias)], self._frame_s)
+                    self._played_frames = self._net_window(self._frame_s)
                 y[frames] = self._played_frames(te[frames] - self._frame_s / 2)
             _keep(self._played, (times, lags), y)
         return y

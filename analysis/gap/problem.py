@@ -27,13 +27,14 @@ from analysis.gap import tolerances as tol
 from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, drift_wander
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import RAMP_RATE_TOLERANCE, GapData
+from hamr_bench.recording.steps import COMMANDED, INFERRED, LOGGED
 
 # Effects that read the field across a plate: with one of them, the plate thickness of each specimen of a batch is
 # fitted (under its tolerance): it sets where its voltage lands on the curve, which a sharp change in field shows
 # and the two gains cannot follow.
 FIELD_EFFECTS = ("field_dependent_d31",)
 PLATE_BOUND = 0.2        # log plate thickness, +-5 tolerance sigmas
-LAG_BOUNDS_S = {"commanded": (0.0, 0.06), "inferred": (-0.03, 0.06), "logged": (-0.03, 0.06)}
+LAG_BOUNDS_S = {COMMANDED: (0.0, 0.06), INFERRED: (-0.03, 0.06), LOGGED: (-0.03, 0.06)}
 SHIFT_BOUND_M = {"actuator": 60e-6, "leg": 1e-3}
 # |log gain| (a factor e): beyond any tolerance, a bound for the solver only. A nominal model so far off that its
 # fit stops at it (Table I's reported values) gets the wide bound instead; every other campaign keeps the narrow
@@ -219,8 +220,8 @@ class Problem:
 
     @staticmethod
     def chain_of(e: RunEngine, quantity: str) -> tuple[str, str, str]:
-        source = (getattr(e.run, "timelines", {}) or {}).get("drive", "commanded")
-        return (e.run.fixture, quantity, source if source in ("inferred", "logged") else "commanded")
+        source = (getattr(e.run, "timelines", {}) or {}).get("drive", COMMANDED)
+        return (e.run.fixture, quantity, source if source in (INFERRED, LOGGED) else COMMANDED)
 
     @staticmethod
     def _quantities(e: RunEngine) -> list[str]:

@@ -31,7 +31,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from hamr_bench.recording.contract import EventKind, Topic
-from hamr_bench.recording.drive_timing import Cycle, infer_cycles, waveform_stats
+from hamr_bench.recording.drive_timing import Cycle, WaveformStats, infer_cycles, waveform_stats
 from hamr_bench.recording.run_metadata import RunMetadata
 
 HOLD_SETTLE_FRACTION = 0.5     # an undriven step without a recorded hold time: the second half of its span
@@ -228,13 +228,26 @@ def _data_span(reader: Any, events: list[Any]) -> tuple[float, float]:
     return float(start), float(end)
 
 
-def _monitor_cycles(reader: Any) -> list[Cycle]:
+@dataclass(frozen=True)
+class _Monitor:
+    """The recorded drive voltage's finite samples and their waveform statistics, read once per recording."""
+    t_s: np.ndarray
+    voltage_V: np.ndarray
+    stats: WaveformStats | None
+
+    @classmethod
+    def read(cls, reader: Any) -> _Monitor:
+        t, v = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
+        ok = np.isfinite(v)
+        t, v = t[ok], v[ok]
+        return cls(t, v, waveform_stats(v) if t.size >= 3 else None)
+
+
+def _monitor_cycles(monitor: _Monitor) -> list[Cycle]:
     """Drive cycles inferred from the recorded drive voltage (a recording without a command stream)."""
-    tm, vm = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
-    ok = np.isfinite(vm)
-    if ok.sum() < 3:
+    if monitor.stats is None:
         return []
-    return infer_cycles(tm[ok], vm[ok], stats=waveform_stats(vm[ok]))
+    return infer_cycles(monitor.t_s, monitor.voltage_V, stats=monitor.stats)
 
 
 def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
@@ -245,7 +258,8 @@ def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
     start_s, end_s = _data_span(reader, events)
     td, vd = _stream(reader, Topic.DRIVE_COMMAND, "voltage_V")
     commanded = td.size > 0
-    monitor_cycles = [] if commanded else _monitor_cycles(reader)
+    monitor = None if commanded else _Monitor.read(reader)
+    monitor_cycles = [] if monitor is None else _monitor_cycles(monitor)
     params = meta.protocol_params
     drive_p = params.get("drive")
     settle = drive_p.get("settle_s") if isinstance(drive_p, dict) else None
@@ -308,7 +322,7 @@ def parse_run(reader: Any, meta: RunMetadata | None = None) -> ParsedRun:
             session=str(cond.get("session", meta.session)), kind=kind, tracked=tracked, drive=drive,
             hold_window_s=hold, settle_s=float(settle) if isinstance(settle, (int, float)) else None,
             measured=measured))
-    timelines = _timelines(reader, steps, monitor_cycles, commanded)
+    timelines = _timelines(reader, steps, monitor, monitor_cycles)
     return ParsedRun(where, meta, events, steps, timelines, start_s, end_s)
 
 
@@ -367,18 +381,16 @@ def _trapezoids(cycles: list[Cycle], steps: list[StepRecord]) -> tuple[np.ndarra
     return t[order], v[order]
 
 
-def _logged_staircase(reader: Any) -> tuple[np.ndarray, np.ndarray] | None:
+def _logged_staircase(monitor: _Monitor) -> tuple[np.ndarray, np.ndarray] | None:
     """The drive column as the staircase it is, where it holds no noise (None where it does: a measured monitor).
     A noise-free drive column is what the lab's logger says its DAQ wrote, held from row to row; the amplifier
     played those steps, and a sensor sample saw the step in force when it was taken. Where the logger also wrote a
     row for each sensor sample, the sensor's clock falls against the command's at a phase of its own in every
     waveform, up to a command step late: a smooth trapezoid through the corners loses that phase, the steps keep
     it. Each value is kept from the row where it changed (a repeat holds no news)."""
-    t, v = _stream(reader, Topic.DRIVE_MONITOR, "voltage_V")
-    ok = np.isfinite(v)
-    t, v = t[ok], v[ok]
-    if t.size < 3 or waveform_stats(v).noise_V > 0.0:
+    if monitor.stats is None or monitor.stats.noise_V > 0.0:
         return None
+    t, v = monitor.t_s, monitor.voltage_V
     changed = np.r_[True, v[1:] != v[:-1]]
     return t[changed], v[changed]
 
@@ -395,14 +407,17 @@ def _setpoints(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t[idx], x[idx]
 
 
-def _timelines(reader: Any, steps: list[StepRecord], monitor_cycles: list[Cycle], commanded: bool) -> Timelines:
+def _timelines(reader: Any, steps: list[StepRecord], monitor: _Monitor | None,
+               monitor_cycles: list[Cycle]) -> Timelines:
+    """Where there is no drive command (`monitor` is not None), the drive is the logged staircase or the
+    trapezoids inferred from the monitor's cycles."""
     sources: dict[str, str] = {}
     empty = (np.empty(0), np.empty(0))
     drive = _stream(reader, Topic.DRIVE_COMMAND, "voltage_V")
-    if commanded:
+    if monitor is None:
         sources["drive"] = COMMANDED
     elif monitor_cycles:
-        logged = _logged_staircase(reader)
+        logged = _logged_staircase(monitor)
         drive, sources["drive"] = (logged, LOGGED) if logged is not None else \
             (_trapezoids(monitor_cycles, steps), INFERRED)
     else:
