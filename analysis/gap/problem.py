@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
 from analysis.gap import tolerances as tol
-from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, drift_wander
+from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, command_step_s, drift_wander
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import RAMP_RATE_TOLERANCE, GapData
 from hamr_bench.recording.steps import COMMANDED, INFERRED, LOGGED
@@ -176,6 +176,9 @@ class Problem:
         self.groups = sorted({self.group_of(e) for e in self.engines})
         self.sessions = sorted({self.session_of(e) for e in self.engines if e.has_contact()})
         self.chains = sorted({self.chain_of(e, q) for e in self.engines for q in self._quantities(e)})
+        self.lag_resolution_s = {c: max((command_step_s(e.run.drive_cmd[0]) for e in self.engines
+                                         if c in {self.chain_of(e, q) for q in self._quantities(e)}), default=0.0)
+                                 for c in self.chains}
         # per specimen group: maps its two log gains (stroke, stiffness) to independent unit-variance scores
         # under the tolerance prior
         # a run of each specimen group: its actuator (the group's presets) and layer count
@@ -540,13 +543,35 @@ class Problem:
         return fit
 
     def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:
-        j = jac.toarray() if hasattr(jac, "toarray") else np.asarray(jac)
+        j = self._lag_secants(lay, x, jac.toarray() if hasattr(jac, "toarray") else np.array(jac, float))
         effects = self.effects_of(lay, x)
         fit = Fit(tuple(lay.names), lay, np.asarray(x, float), np.asarray(res, float), j, effects)
         if "sensor_drift" in lay.names:
             fit.drift_strength = self.drift_strength(lay, x)
             effects["sensor_drift"] = EffectValue(fit.drift_strength, effects["sensor_drift"].shapes)
         return fit
+
+    def _lag_secants(self, lay: Layout, x: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """The Jacobian with each sensor chain's lag column taken as the secant over one drive update interval
+        centred on the fit (clipped to the bounds). Samples taken in step with a staircase drive read it the
+        same way until a lag carries them across its next update: the rows are a staircase in the lag, flat
+        then steep within each interval, and a finite difference much finer than it reads either 0 or a slope
+        many times the envelope's. The held-out steps extrapolate along this column and the covariance reads
+        it, so a steep entry lets a linearised refit move the lag far and predict a left-out condition far off,
+        and takes the lag as resolved below the interval the data can place it to. The secant over one
+        interval is the envelope's slope wherever in the interval the lag sits (docs/gap.md, Method)."""
+        lo, hi = lay.bounds()
+        for chain, width in self.lag_resolution_s.items():
+            i = lay.index.get(("lag",) + chain)
+            if i is None or width <= 0.0:
+                continue
+            a, b = max(lo[i], x[i] - width / 2), min(hi[i], x[i] + width / 2)
+            if b <= a:
+                continue
+            xa, xb = x.copy(), x.copy()
+            xa[i], xb[i] = a, b
+            j[:, i] = (self.residual(lay, xb) - self.residual(lay, xa)) / (b - a)
+        return j
 
     def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
         """Wander rate of the fitted force baselines, N/sqrt(s), a random walk's rate: sqrt(sum of squared changes

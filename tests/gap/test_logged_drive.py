@@ -131,3 +131,41 @@ def test_a_held_out_step_leaves_a_direction_the_training_rows_do_not_see():
     assert spreads[held] == pytest.approx(np.sqrt(1.0 + (jac[30:n, 0] / np.linalg.norm(jac[~np.r_[held, False], 0]))
                                                   ** 2), rel=0.05)
     assert determined(np.array([5.0, 1e-2, 1e-4])).tolist() == [True, True, False]
+
+
+def test_a_lag_column_is_the_staircase_envelope_slope_wherever_the_lag_sits(tmp_path):
+    """Force samples taken in step with a logged staircase read it the same way until a lag carries them across
+    the next update: the rows are flat in the lag, then steep. A fine finite difference reads 0 or several times
+    the envelope's slope depending on where the fit's lag sits; the fit's Jacobian takes the secant over one update
+    interval instead, the same wherever in the interval the lag is."""
+    from analysis.gap.features import load_gap_data
+    from analysis.gap.problem import Problem
+
+    csv_path = tmp_path / "blocked.csv"
+    _write_trace(csv_path, 0.0, 0.3e-3)
+    import_trace(csv_path, tmp_path / "blocked.mcap", "actuator", layers=2)
+    p = Problem(load_gap_data([tmp_path / "blocked.mcap"]))
+    (chain,) = p.chains
+    assert p.lag_resolution_s[chain] == pytest.approx(CMD_DT_S)
+    lay = p.layout(())
+    i = lay.index[("lag",) + chain]
+    ramps = np.array([r.phase in ("rise", "fall") for r in p.rows])
+    assert ramps.any()
+    fine, secant = [], []
+    for lag_s in np.arange(0.0, 1.0e-3, 0.1e-3):
+        x = lay.vector()
+        x[i] = lag_s
+        r = p.residual(lay, x)
+        x_fd = x.copy()
+        x_fd[i] += 1e-5
+        fine.append(((p.residual(lay, x_fd) - r) / 1e-5)[:p.y.size][ramps])
+        secant.append(p._lag_secants(lay, x, np.zeros((r.size, x.size)))[:p.y.size, i][ramps])
+    fine_a, secant_a = np.abs(np.array(fine)), np.abs(np.array(secant))
+    # the premise: the fine difference is 0 at some lags and far above the envelope at others
+    assert fine_a.min(axis=0).max() == pytest.approx(0.0, abs=1e-6 * secant_a.max())
+    assert (fine_a.max(axis=0) > 2.5 * secant_a.mean(axis=0)).all()
+    # the secant: the same slope within 15 % across the interval, on every ramp row
+    assert (secant_a.min(axis=0) > 0.85 * secant_a.max(axis=0)).all()
+    fit = p.solve((), p.initial_nuisances(), max_nfev=30)
+    expected = p._lag_secants(fit.layout, fit.x, np.zeros_like(fit.jac))[:, i]
+    assert fit.jac[:, i] == pytest.approx(expected)
