@@ -176,9 +176,13 @@ class Problem:
         self.groups = sorted({self.group_of(e) for e in self.engines})
         self.sessions = sorted({self.session_of(e) for e in self.engines if e.has_contact()})
         self.chains = sorted({self.chain_of(e, q) for e in self.engines for q in self._quantities(e)})
-        self.lag_resolution_s = {c: max((command_step_s(e.run.drive_cmd[0]) for e in self.engines
-                                         if c in {self.chain_of(e, q) for q in self._quantities(e)}), default=0.0)
-                                 for c in self.chains}
+        # per sensor chain, the longest drive update interval among its runs (`_lag_secants`)
+        self.lag_resolution_s: dict[tuple[str, str, str], float] = {}
+        for e in self.engines:
+            step = command_step_s(e.run.drive_cmd[0])
+            for q in self._quantities(e):
+                c = self.chain_of(e, q)
+                self.lag_resolution_s[c] = max(self.lag_resolution_s.get(c, 0.0), step)
         # per specimen group: maps its two log gains (stroke, stiffness) to independent unit-variance scores
         # under the tolerance prior
         # a run of each specimen group: its actuator (the group's presets) and layer count
