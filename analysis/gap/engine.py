@@ -434,9 +434,9 @@ class RunEngine:
             plates = plates * self._memo(("gain",) + d_key, lambda: self._plate_gains(d31, t_p))
         y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
-            n = cr.shape("exponent", "creep")
+            n, q = cr.shape("exponent", "creep"), cr.shape("curvature", "creep")
             base = y = y[self._segments.of]
-            resp = self._memo(("creep", n, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n))
+            resp = self._memo(("creep", n, q, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n, q))
             y = y + cr.strength * resp
         return y
 

@@ -159,20 +159,43 @@ def slope_after_reversal(weights: np.ndarray) -> float:
     return 1.0 - float(np.sum(weights))
 
 
-# ------------------------------------------------------------------ creep: power law (log law at n -> 0)
+# ------------------------------------------------------------------ creep: power law (log law at n -> 0), curved
 CREEP_TAU0_S = 1e-3                # regularises the kernel at the step itself
 # The strength is the growth per decade from 50 ms to 400 ms after a drive increment: the ages a step reaches
 # within the actuator protocol's dwell (its default ramp 50 ms, dwell 0.4 s), the only ones the data see directly.
 # Outside them the power law extrapolates: creep faster than a ramp reads as a gain, slower as a tilt of the run.
 CREEP_SPAN_DECADES = (math.log10(0.05), math.log10(0.4))
+CREEP_GRID_POINTS = 4001    # the log-time grid a curved kernel is integrated on (~1e-3 decade a step)
 
 
-def creep_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
-    """phi_n(tau) = ((tau + tau0)^n - 1) / (n ln 10) / m_n (tau in s), log10(tau + tau0) at n = 0: zero at 1 s,
-    growing by 1 per decade on average over 50 - 400 ms (m_n: the mean of the slope (tau)^n per decade there).
-    A step grows as 1 + g phi_n(t - t_step): low early, on nominal at 1 s, still creeping after (Nutting's power
-    law; the log law is its n -> 0 limit). n > 0: the growth per decade rises with time; n < 0: it falls, and the
-    creep saturates (most of it early)."""
+def creep_kernel(tau_s: np.ndarray, exponent: float, curvature: float = 0.0) -> np.ndarray:
+    """phi(tau): zero at 1 s, growing by 1 per decade on average over 50 - 400 ms; its growth per decade at age
+    tau is proportional to 10^(n L + q (L - L_c)^2), L = log10(tau + tau0), L_c the window's centre.
+
+    At q = 0 it is Nutting's power law, ((tau + tau0)^n - 1) / (n ln 10) / m_n (m_n: the mean of the slope tau^n
+    per decade over the window), the log law at n = 0: n > 0 the growth per decade rises with time, n < 0 it
+    falls and the creep saturates. q < 0 makes the growth per decade a bump in log time (a log-normal spread of
+    retardation times, as a creep dominated by one or two time constants is), q > 0 a dip."""
+    if curvature == 0.0:
+        return _power_law_kernel(tau_s, exponent)
+    lt = np.log10(np.asarray(tau_s, float) + CREEP_TAU0_S)
+    grid = np.linspace(min(float(lt.min(initial=0.0)), 0.0) - 0.01, max(float(lt.max(initial=0.0)), 0.0) + 0.01,
+                       CREEP_GRID_POINTS)
+    a, b = CREEP_SPAN_DECADES
+    window = np.linspace(a, b, 2001)
+    mean_slope = float(np.trapezoid(_creep_slope(window, exponent, curvature), window)) / (b - a)
+    slope = _creep_slope(grid, exponent, curvature) / mean_slope
+    phi = np.r_[0.0, np.cumsum(0.5 * (slope[1:] + slope[:-1]) * np.diff(grid))]
+    phi -= np.interp(0.0, grid, phi)
+    return np.interp(lt, grid, phi)
+
+
+def _creep_slope(log10_tau: np.ndarray, exponent: float, curvature: float) -> np.ndarray:
+    centre = 0.5 * (CREEP_SPAN_DECADES[0] + CREEP_SPAN_DECADES[1])
+    return 10.0 ** (exponent * (log10_tau - centre) + curvature * (log10_tau - centre) ** 2)
+
+
+def _power_law_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
     t = np.asarray(tau_s, float) + CREEP_TAU0_S
     if exponent == 0.0:
         return np.log10(t)
@@ -184,21 +207,21 @@ def creep_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
     return np.expm1(exponent * np.log(t)) / (exponent * ln10) / mean_slope
 
 
-def creep_response(y: np.ndarray, dt_s: float, exponent: float) -> np.ndarray:
+def creep_response(y: np.ndarray, dt_s: float, exponent: float, curvature: float = 0.0) -> np.ndarray:
     """sum_k dy_k phi_n(t - t_k) on a uniform grid (the creep part per unit strength), one FFT convolution."""
     dy = np.r_[0.0, np.diff(y)]
     if dy.size < 2:
         return np.zeros_like(y)
     size = sp_fft.next_fast_len(2 * dy.size - 1, real=True)
-    spectrum = _kernel_spectrum(dy.size, dt_s, exponent, size)
+    spectrum = _kernel_spectrum(dy.size, dt_s, exponent, curvature, size)
     return sp_fft.irfft(sp_fft.rfft(dy, size) * spectrum, size)[:dy.size]
 
 
 @functools.lru_cache(maxsize=128)
-def _kernel_spectrum(n: int, dt_s: float, exponent: float, size: int) -> np.ndarray:
+def _kernel_spectrum(n: int, dt_s: float, exponent: float, curvature: float, size: int) -> np.ndarray:
     """The creep kernel's spectrum on an n-sample grid, zero-padded to `size`: a fit's Jacobian changes the drive
     (every other parameter's column) far more often than the exponent, and each run's kernel is the same then."""
-    out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent), size)
+    out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent, curvature), size)
     out.flags.writeable = False      # cached: shared by every caller
     return out
 
