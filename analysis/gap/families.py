@@ -70,7 +70,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            {"density_exponent": Shape(0.0, -2.0, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
            scale=0.05, grid_shapes=({"density_exponent": -1.0},)),
     Family("creep", "growth from 50 to 400 ms after a step, per decade (fraction of the step)", (0.0, 0.12),
-           "power-law superposition of drive increments (log law at n = 0)", "drive",
+           "superposition of drive increments, power law in age (log law at n = 0) curved in log time by q", "drive",
            {"exponent": Shape(0.0, -0.8, 0.6, 0.3), "curvature": Shape(0.0, -2.0, 0.3, 0.5)}, scale=0.01),
     Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),
            "d31 gain 1 + a h(E), h a knee E^p / (E^p + c^p) in field", "drive",

@@ -208,7 +208,8 @@ def _power_law_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
 
 
 def creep_response(y: np.ndarray, dt_s: float, exponent: float, curvature: float = 0.0) -> np.ndarray:
-    """sum_k dy_k phi_n(t - t_k) on a uniform grid (the creep part per unit strength), one FFT convolution."""
+    """sum_k dy_k phi(t - t_k) (`creep_kernel`) on a uniform grid (the creep part per unit strength), one FFT
+    convolution."""
     dy = np.r_[0.0, np.diff(y)]
     if dy.size < 2:
         return np.zeros_like(y)
@@ -220,7 +221,8 @@ def creep_response(y: np.ndarray, dt_s: float, exponent: float, curvature: float
 @functools.lru_cache(maxsize=128)
 def _kernel_spectrum(n: int, dt_s: float, exponent: float, curvature: float, size: int) -> np.ndarray:
     """The creep kernel's spectrum on an n-sample grid, zero-padded to `size`: a fit's Jacobian changes the drive
-    (every other parameter's column) far more often than the exponent, and each run's kernel is the same then."""
+    (every other parameter's column) far more often than the creep's shape, and each run's kernel is the same
+    then."""
     out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent, curvature), size)
     out.flags.writeable = False      # cached: shared by every caller
     return out
