@@ -44,13 +44,6 @@ WIDE_GAIN_BOUND = 3.0
 COVARIANCE_RCOND = 1e-10  # singular values of the Jacobian below this share of the largest: undetermined
 NAN_RESIDUAL = 1e3        # a row the model cannot evaluate (beyond the linkage's reach)
 RUN_MODEL_CACHE = 64      # predictions kept per run (least recently used dropped): a Jacobian's steps
-# The grid each sensor chain's lag is searched on after a descent (`Problem._searched_lags`): +-1 drive update
-# interval (LAG_SEARCH_DEFAULT_S where the chain has none) in 2 x LAG_SEARCH_STEPS steps, at most
-# LAG_SEARCH_ROUNDS times a solve; a point must lower the objective by LAG_SEARCH_MIN_GAIN (chi^2 units)
-LAG_SEARCH_STEPS = 20
-LAG_SEARCH_ROUNDS = 3
-LAG_SEARCH_MIN_GAIN = 1.0
-LAG_SEARCH_DEFAULT_S = 1e-3
 DRIFT_RIDGE_N = 2e-3      # prior scale of the baseline coefficients (N): a sensor baseline wanders by mN, not by the
 #                           blocked force; without it near-collinear spline and warm-up columns trade large opposite
 #                           coefficients for phase-dependent offsets
@@ -536,8 +529,7 @@ class Problem:
     def solve(self, names: tuple[str, ...] | list[str], start: dict[tuple, float] | None = None,
               max_nfev: int = 60) -> Fit:
         """Fit the effects `names` with every nuisance; `start` holds parameter values to start from (any
-        subset; others from their defaults). After each descent the sensor lags are searched on a grid
-        (`_searched_lags`), and where that finds a lower objective the descent starts again from there."""
+        subset; others from their defaults)."""
         lay = self.layout(names)
         lo, hi = lay.bounds()
         scale = np.array([p.scale for p in lay.params])
@@ -546,45 +538,13 @@ class Problem:
         # parameter never moves; at exactly 0 the step is absolute
         x0 = lay.vector(start)
         x0 = np.where(np.abs(x0) < 1e-9 * scale, 0.0, x0)
-        nfev = 0
-        for round_ in range(LAG_SEARCH_ROUNDS + 1):
-            r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
-                              jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
-                              ftol=1e-6, xtol=1e-6)
-            nfev += int(r.nfev)
-            searched = self._searched_lags(lay, r.x, float(r.fun @ r.fun)) if round_ < LAG_SEARCH_ROUNDS else None
-            if searched is None:
-                break
-            x0 = searched
+        r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
+                          jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
+                          ftol=1e-6, xtol=1e-6)
         fit = self._fit(lay, r.x, r.fun, r.jac)
         fit.extra["converged"] = bool(r.status > 0)    # a tolerance met, not stopped by max_nfev
-        fit.extra["nfev"] = nfev
+        fit.extra["nfev"] = int(r.nfev)
         return fit
-
-    def _searched_lags(self, lay: Layout, x: np.ndarray, objective: float) -> np.ndarray | None:
-        """`x` with each sensor chain's lag moved to the best point of a grid about it (one chain after the
-        other, the rest held), or None where no point lowers the objective by LAG_SEARCH_MIN_GAIN. Samples in
-        step with a staircase drive make the objective a string of plateaus and kinks in the lag (`_lag_secants`):
-        a descent stops in the first dip, and an effect that delays the response (creep, hysteresis) moves the
-        best lag by a fraction of a drive update, which a nominal fit had spent on mimicking it. Found on the
-        self-check's creep trials: with the lag held where the nominal fit left it, a creep's fit stopped at 5x
-        the objective of the one a lag 0.8 ms away allows, its strength half the truth (docs/gap.md, Method)."""
-        best = objective
-        x = x.copy()
-        for chain in self.chains:
-            i = lay.index[("lag",) + chain]
-            width = self.lag_resolution_s.get(chain, 0.0) or LAG_SEARCH_DEFAULT_S
-            grid = np.clip(x[i] + width * np.linspace(-1.0, 1.0, 2 * LAG_SEARCH_STEPS + 1),
-                           lay.params[i].lo, lay.params[i].hi)
-            held = float(x[i])
-            for v in grid:
-                x[i] = v
-                z = self.residual(lay, x)
-                c = float(z @ z)
-                if c < best:
-                    best, held = c, float(v)
-            x[i] = held
-        return x if best < objective - LAG_SEARCH_MIN_GAIN else None
 
     def _fit(self, lay: Layout, x: np.ndarray, res: np.ndarray, jac: object) -> Fit:
         j = self._lag_secants(lay, x, jac.toarray() if hasattr(jac, "toarray") else np.array(jac, float))
