@@ -138,24 +138,42 @@ def test_negative_curvature_makes_the_growth_per_decade_a_bump_in_log_time():
     assert np.all(np.diff(per_decade[:peak + 1]) > 0) and np.all(np.diff(per_decade[peak:]) < 0)
 
 
+# The ages a dwell shows a step's creep at (20 ms - 2 s).
+DWELL_AGES_S = np.geomspace(0.02, 2.0, 60)
+
+
+def _bench_creep_growth(strength, taus_s, weights):
+    """The bench's creep (a Kelvin-Voigt chain, another formula than the family's) after a unit step, at the
+    dwell's ages, relative to its response at 1 s, minus 1: what the family's kernel x strength stands for."""
+    from sim_devices.drive_chain import PronyCreep
+
+    r = PronyCreep(strength, taus_s=taus_s, weights=weights).step_response(np.r_[DWELL_AGES_S, 1.0])
+    return r[:-1] / r[-1] - 1.0
+
+
+def _best_creep_fit(target, curved, start):
+    """Least squares of strength x the family's kernel to `target` over the dwell's ages, the shapes within the
+    family's bounds (the curvature held at 0 unless `curved`); `start` is (strength, exponent, curvature)."""
+    from scipy.optimize import least_squares
+
+    n_b, q_b = FAMILIES["creep"].shapes["exponent"], FAMILIES["creep"].shapes["curvature"]
+
+    def res(p: np.ndarray) -> np.ndarray:
+        return p[0] * op.creep_kernel(DWELL_AGES_S - op.CREEP_TAU0_S, p[1], p[2] if curved else 0.0) - target
+
+    lo, hi = [-1.0, n_b.lo] + ([q_b.lo] if curved else []), [1.0, n_b.hi] + ([q_b.hi] if curved else [])
+    return least_squares(res, start[:len(lo)], bounds=(lo, hi))
+
+
 @pytest.mark.parametrize("taus_s,weights", [((0.1,), (1.0,)), ((0.2, 5.0), (1.0, 0.3))])
 def test_a_creep_dominated_by_one_time_constant_is_followed_closer_with_curvature(taus_s, weights):
     """The bench's creep is a sum of exponentials (a different formula). Where one time constant dominates, its
     growth per decade is a bump no power law follows; the curved shape, within the family's bounds, follows the
     ages the dwell shows (20 ms - 2 s) at least 4x closer than the best power law."""
-    from scipy.optimize import least_squares
-    from sim_devices.drive_chain import PronyCreep
-
-    ages = np.geomspace(0.02, 2.0, 60)
-    r = PronyCreep(0.02, taus_s=taus_s, weights=weights).step_response(np.r_[ages, 1.0])
-    target = r[:-1] / r[-1] - 1.0
-    n_b, q_b = FAMILIES["creep"].shapes["exponent"], FAMILIES["creep"].shapes["curvature"]
+    target = _bench_creep_growth(0.02, taus_s, weights)
 
     def best_rms(curved: bool) -> float:
-        def res(p: np.ndarray) -> np.ndarray:
-            return p[0] * op.creep_kernel(ages - op.CREEP_TAU0_S, p[1], p[2] if curved else 0.0) - target
-        lo, hi = [-1.0, n_b.lo] + ([q_b.lo] if curved else []), [1.0, n_b.hi] + ([q_b.hi] if curved else [])
-        fit = least_squares(res, [0.01] + [0.0] * (len(lo) - 1), bounds=(lo, hi))
+        fit = _best_creep_fit(target, curved, [0.01, 0.0, 0.0])
         return float(np.sqrt(np.mean(fit.fun ** 2)))
 
     assert best_rms(True) * 4.0 < best_rms(False)
@@ -166,20 +184,13 @@ def test_the_creep_family_reads_one_kelvin_voigt_element_of_any_time_constant(ta
     """One exponential (the bench's form, not the family's) from far below the dwell to far above it: the best
     shape within the family's bounds follows the ages the dwell shows (20 ms - 2 s) and reads its growth per decade
     over 50 - 400 ms within 5 %."""
-    from scipy.optimize import least_squares
-    from sim_devices.drive_chain import PronyCreep
+    from sim_devices.scenarios import library_strength
 
-    ages = np.geomspace(0.02, 2.0, 60)
-    r = PronyCreep(0.005, taus_s=(tau_s,), weights=(1.0,)).step_response(np.r_[ages, 1.0, 0.05, 0.4])
-    target, truth = r[:-3] / r[-3] - 1.0, (r[-1] - r[-2]) / r[-3] / np.log10(8.0)
-    n_b, q_b = FAMILIES["creep"].shapes["exponent"], FAMILIES["creep"].shapes["curvature"]
-
-    def res(p: np.ndarray) -> np.ndarray:
-        return p[0] * op.creep_kernel(ages - op.CREEP_TAU0_S, p[1], p[2]) - target
-
-    fits = [least_squares(res, [0.01, n0, -0.5], bounds=([-1.0, n_b.lo, q_b.lo], [1.0, n_b.hi, q_b.hi]))
-            for n0 in (n_b.lo / 2, 0.0, n_b.hi / 2)]
-    best = min(fits, key=lambda f: f.cost)
+    target = _bench_creep_growth(0.005, (tau_s,), (1.0,))
+    truth = library_strength("creep", 0.005, {"tau1_s": tau_s, "weight1": 1.0})
+    n_b = FAMILIES["creep"].shapes["exponent"]
+    best = min((_best_creep_fit(target, True, [0.01, n0, -0.5]) for n0 in (n_b.lo / 2, 0.0, n_b.hi / 2)),
+               key=lambda f: f.cost)
     assert np.sqrt(np.mean(best.fun ** 2)) < 0.025 * np.ptp(target)
     assert best.x[0] == pytest.approx(truth, rel=0.05)
 
