@@ -434,9 +434,10 @@ class RunEngine:
             plates = plates * self._memo(("gain",) + d_key, lambda: self._plate_gains(d31, t_p))
         y = plates[0] - plates[1]
         if cr is not None and cr.strength != 0:
-            n, q = cr.shape("exponent", "creep"), cr.shape("curvature", "creep")
+            n, q, r = (cr.shape(k, "creep") for k in ("exponent", "curvature", "skew"))
             base = y = y[self._segments.of]
-            resp = self._memo(("creep", n, q, h_key, d_key), lambda: op.creep_response(base, DENSE_DT_S, n, q))
+            resp = self._memo(("creep", n, q, r, h_key, d_key),
+                              lambda: op.creep_response(base, DENSE_DT_S, n, q, r))
             y = y + cr.strength * resp
         return y
 

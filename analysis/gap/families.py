@@ -72,8 +72,10 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     # The exponent's bounds reach a single Kelvin-Voigt element anywhere from ~40 ms (growth front-loaded: n -> -2)
     # to far beyond the dwell (growth per decade ~ age: n -> 1); above 1 a creep would outgrow a viscous flow.
     Family("creep", "growth from 50 to 400 ms after a step, per decade (fraction of the step)", (0.0, 0.12),
-           "superposition of drive increments, power law in age (log law at n = 0) curved in log time by q", "drive",
-           {"exponent": Shape(0.0, -2.0, 1.0, 0.3), "curvature": Shape(0.0, -2.0, 0.3, 0.5)}, scale=0.01),
+           "superposition of drive increments, power law in age (log law at n = 0), curved in log time by q and skewed"
+           " by r", "drive",
+           {"exponent": Shape(0.0, -2.0, 1.0, 0.3), "curvature": Shape(0.0, -2.0, 0.3, 0.5),
+            "skew": Shape(0.0, -0.8, 0.8, 0.3)}, scale=0.01),
     Family("field_dependent_d31", "d31 at 250 V / d31 at 100 V - 1 (nominal plate)", (-0.6, 1.5),
            "d31 gain 1 + a h(E), h a knee E^p / (E^p + c^p) in field", "drive",
            {"log10_knee_V_per_um": Shape(0.5, -0.7, 1.0, 0.6), "steepness": Shape(1.5, 0.5, 8.0, 2.0)},

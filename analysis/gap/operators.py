@@ -168,31 +168,43 @@ CREEP_SPAN_DECADES = (math.log10(0.05), math.log10(0.4))
 CREEP_GRID_POINTS = 4001    # the log-time grid a curved kernel is integrated on (~1e-3 decade a step)
 
 
-def creep_kernel(tau_s: np.ndarray, exponent: float, curvature: float = 0.0) -> np.ndarray:
+def creep_kernel(tau_s: np.ndarray, exponent: float, curvature: float = 0.0, skew: float = 0.0) -> np.ndarray:
     """phi(tau): zero at 1 s, growing by 1 per decade on average over 50 - 400 ms; its growth per decade at age
-    tau is proportional to 10^(n L + q (L - L_c)^2), L = log10(tau + tau0), L_c the window's centre.
+    tau is proportional to 10^(n x + q x^2 + r x^3), x = L - L_c, L = log10(tau + tau0), L_c the window's centre.
 
-    At q = 0 it is Nutting's power law, ((tau + tau0)^n - 1) / (n ln 10) / m_n (m_n: the mean of the slope tau^n
-    per decade over the window), the log law at n = 0: n > 0 the growth per decade rises with time, n < 0 it
-    falls and the creep saturates. q < 0 makes the growth per decade a bump in log time (a log-normal spread of
-    retardation times, as a creep dominated by one or two time constants is), q > 0 a dip."""
-    if curvature == 0.0:
+    At q = r = 0 it is Nutting's power law, ((tau + tau0)^n - 1) / (n ln 10) / m_n (m_n: the mean of the slope
+    tau^n per decade over the window), the log law at n = 0: n > 0 the growth per decade rises with time, n < 0
+    it falls and the creep saturates. q < 0 makes the growth per decade a bump in log time (a log-normal spread
+    of retardation times, as a creep dominated by one or two time constants is), q > 0 a dip. The skew r tilts
+    the bump: a second band of retardation times decades from the first shows as a shoulder on one side, which
+    a parabola in log time cannot follow."""
+    if curvature == 0.0 and skew == 0.0:
         return _power_law_kernel(tau_s, exponent)
     lt = np.log10(np.asarray(tau_s, float) + CREEP_TAU0_S)
     grid = np.linspace(min(float(lt.min(initial=0.0)), 0.0) - 0.01, max(float(lt.max(initial=0.0)), 0.0) + 0.01,
                        CREEP_GRID_POINTS)
     a, b = CREEP_SPAN_DECADES
     window = np.linspace(a, b, 2001)
-    mean_slope = float(np.trapezoid(_creep_slope(window, exponent, curvature), window)) / (b - a)
-    slope = _creep_slope(grid, exponent, curvature) / mean_slope
+    mean_slope = float(np.trapezoid(_creep_slope(window, exponent, curvature, skew), window)) / (b - a)
+    slope = _creep_slope(grid, exponent, curvature, skew) / mean_slope
     phi = np.r_[0.0, np.cumsum(0.5 * (slope[1:] + slope[:-1]) * np.diff(grid))]
     phi -= np.interp(0.0, grid, phi)
     return np.interp(lt, grid, phi)
 
 
-def _creep_slope(log10_tau: np.ndarray, exponent: float, curvature: float) -> np.ndarray:
+# The skew's cubic term saturates at +-CREEP_SKEW_CAP decades (a smooth cap): left free it would reach 10^20 at
+# the ages of a long run, and the FFT convolution would lose the window's part to rounding. Six decades of
+# growth-rate ratio is far beyond any solid's creep; at r = 0 the kernel is the uncapped two-shape one exactly.
+CREEP_SKEW_CAP = 6.0
+
+
+def _creep_slope(log10_tau: np.ndarray, exponent: float, curvature: float, skew: float = 0.0) -> np.ndarray:
     centre = 0.5 * (CREEP_SPAN_DECADES[0] + CREEP_SPAN_DECADES[1])
-    return 10.0 ** (exponent * (log10_tau - centre) + curvature * (log10_tau - centre) ** 2)
+    x = log10_tau - centre
+    u = x * (exponent + x * curvature)
+    if skew != 0.0:
+        u = u + CREEP_SKEW_CAP * np.tanh(skew * x ** 3 / CREEP_SKEW_CAP)
+    return 10.0 ** u
 
 
 def _power_law_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
@@ -207,23 +219,24 @@ def _power_law_kernel(tau_s: np.ndarray, exponent: float) -> np.ndarray:
     return np.expm1(exponent * np.log(t)) / (exponent * ln10) / mean_slope
 
 
-def creep_response(y: np.ndarray, dt_s: float, exponent: float, curvature: float = 0.0) -> np.ndarray:
+def creep_response(y: np.ndarray, dt_s: float, exponent: float, curvature: float = 0.0,
+                   skew: float = 0.0) -> np.ndarray:
     """sum_k dy_k phi(t - t_k) (`creep_kernel`) on a uniform grid (the creep part per unit strength), one FFT
     convolution."""
     dy = np.r_[0.0, np.diff(y)]
     if dy.size < 2:
         return np.zeros_like(y)
     size = sp_fft.next_fast_len(2 * dy.size - 1, real=True)
-    spectrum = _kernel_spectrum(dy.size, dt_s, exponent, curvature, size)
+    spectrum = _kernel_spectrum(dy.size, dt_s, exponent, curvature, skew, size)
     return sp_fft.irfft(sp_fft.rfft(dy, size) * spectrum, size)[:dy.size]
 
 
 @functools.lru_cache(maxsize=128)
-def _kernel_spectrum(n: int, dt_s: float, exponent: float, curvature: float, size: int) -> np.ndarray:
+def _kernel_spectrum(n: int, dt_s: float, exponent: float, curvature: float, skew: float, size: int) -> np.ndarray:
     """The creep kernel's spectrum on an n-sample grid, zero-padded to `size`: a fit's Jacobian changes the drive
     (every other parameter's column) far more often than the creep's shape, and each run's kernel is the same
     then."""
-    out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent, curvature), size)
+    out = sp_fft.rfft(creep_kernel(np.arange(n) * dt_s, exponent, curvature, skew), size)
     out.flags.writeable = False      # cached: shared by every caller
     return out
 
