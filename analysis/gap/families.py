@@ -6,8 +6,8 @@ pairs side by side):
 |---|---|---|
 | hysteresis | per plate, a weighted sum of plays on the unipolar range (threshold density ~ r^gamma), read |
 |   | back through its first rise (tip share c mixes in the unmapped sum) | largest loop gap / span, full drive |
-| creep | power-law (Nutting) superposition of every drive increment, exponent n of either sign; log law at 0 |
-|   | | growth per decade, 50 - 400 ms       |
+| creep | power-law (Nutting) superposition of every drive increment, exponent n of either sign; log law at 0; |
+|   | curved (q) and skewed (r) in log time | growth per decade, 50 - 400 ms |
 | field_dependent_d31 | d31 gain 1 + a E^p / (E^p + c^p), knee c, steepness p, either sign | d31(250 V)/d31(100 V) - 1 |
 | base_compliance | series spring x = C F_ref (F / F_ref)^beta, pull side rho x | blocked-force loss, 2-layer, 250 V |
 | sensor_compliance | the same spring in the sensor | secant compliance at 50 mN, m/N |
@@ -70,7 +70,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            {"density_exponent": Shape(0.0, -2.0, 2.0, 1.0), "tip_share": Shape(0.0, 0.0, 1.0, 0.5)},
            scale=0.05, grid_shapes=({"density_exponent": -1.0},)),
     # The exponent's bounds reach a single Kelvin-Voigt element anywhere from ~40 ms (growth front-loaded: n -> -2)
-    # to far beyond the dwell (growth per decade ~ age: n -> 1); above 1 a creep would outgrow a viscous flow.
+    # to far beyond the dwell (growth per decade ~ age: n -> 1); above 1 a creep would outgrow a viscous flow. The
+    # skew (a cubic in log time) lets the bump carry a shoulder: a second band of time constants decades away.
     Family("creep", "growth from 50 to 400 ms after a step, per decade (fraction of the step)", (0.0, 0.12),
            "superposition of drive increments, power law in age (log law at n = 0), curved in log time by q and skewed"
            " by r", "drive",
