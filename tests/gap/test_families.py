@@ -159,7 +159,7 @@ def _best_creep_fit(target, shapes, start, ages_s=DWELL_AGES_S):
     bounds = [FAMILIES["creep"].shapes[name] for name in shapes]
 
     def res(p: np.ndarray) -> np.ndarray:
-        return p[0] * op.creep_kernel(ages_s - op.CREEP_TAU0_S, **dict(zip(shapes, p[1:]))) - target
+        return p[0] * op.creep_kernel(ages_s - op.CREEP_TAU0_S, **dict(zip(shapes, p[1:], strict=True))) - target
 
     return least_squares(res, start, bounds=([-1.0] + [b.lo for b in bounds], [1.0] + [b.hi for b in bounds]))
 
