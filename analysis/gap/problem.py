@@ -27,6 +27,7 @@ from analysis.gap import tolerances as tol
 from analysis.gap.engine import EffectValue, Effects, RunEngine, RunNuisance, command_step_s, drift_wander
 from analysis.gap.families import FAMILIES
 from analysis.gap.features import RAMP_RATE_TOLERANCE, GapData
+from analysis.gap.lag_envelope import ENVELOPE_NFEV, FD_STEP, SecantJacobian
 from hamr_bench.recording.steps import COMMANDED, INFERRED, LOGGED
 
 # Effects that read the field across a plate: with one of them, the plate thickness of each specimen of a batch is
@@ -527,9 +528,11 @@ class Problem:
 
     # --- solving -----------------------------------------------------------------------------------------------
     def solve(self, names: tuple[str, ...] | list[str], start: dict[tuple, float] | None = None,
-              max_nfev: int = 60) -> Fit:
+              max_nfev: int = 60, free_lags: bool = False) -> Fit:
         """Fit the effects `names` with every nuisance; `start` holds parameter values to start from (any
-        subset; others from their defaults)."""
+        subset; others from their defaults). `free_lags`: the start's lags were fitted without an effect that
+        delays the response on the ramps (a drive effect added to a fit), and are first moved along their
+        envelope (`lag_envelope`)."""
         lay = self.layout(names)
         lo, hi = lay.bounds()
         scale = np.array([p.scale for p in lay.params])
@@ -538,8 +541,21 @@ class Problem:
         # parameter never moves; at exactly 0 the step is absolute
         x0 = lay.vector(start)
         x0 = np.where(np.abs(x0) < 1e-9 * scale, 0.0, x0)
+        lags = self._lag_columns(lay) if free_lags else {}
+        if lags:
+            # a few evaluations with the lags' columns the secants, then the ordinary solve from there
+            jac = SecantJacobian(lay.sparsity, lags, lo, hi)
+            fun = lambda x: self.residual(lay, x)  # noqa: E731
+            x0 = least_squares(fun, x0, jac=lambda x: jac(fun, x), bounds=(lo, hi), x_scale=scale, method="trf",
+                               max_nfev=ENVELOPE_NFEV, ftol=1e-6, xtol=1e-6).x
+        return self._least_squares(lay, x0, max_nfev)
+
+    def _least_squares(self, lay: Layout, x0: np.ndarray, max_nfev: int) -> Fit:
+        """One bounded trust-region solve from x0, the Jacobian by differences grouped by the sparsity."""
+        lo, hi = lay.bounds()
+        scale = np.array([p.scale for p in lay.params])
         r = least_squares(lambda x: self.residual(lay, x), x0, bounds=(lo, hi), x_scale=scale,
-                          jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=1e-4,
+                          jac_sparsity=lay.sparsity, method="trf", max_nfev=max_nfev, diff_step=FD_STEP,
                           ftol=1e-6, xtol=1e-6)
         fit = self._fit(lay, r.x, r.fun, r.jac)
         fit.extra["converged"] = bool(r.status > 0)    # a tolerance met, not stopped by max_nfev
@@ -555,6 +571,15 @@ class Problem:
             effects["sensor_drift"] = EffectValue(fit.drift_strength, effects["sensor_drift"].shapes)
         return fit
 
+    def _lag_columns(self, lay: Layout) -> dict[int, float]:
+        """Each sensor chain's lag: its parameter index -> the chain's drive update interval (s)."""
+        out = {}
+        for chain, width in self.lag_resolution_s.items():
+            i = lay.index.get(("lag",) + chain)
+            if i is not None and width > 0.0:
+                out[i] = width
+        return out
+
     def _lag_secants(self, lay: Layout, x: np.ndarray, j: np.ndarray) -> np.ndarray:
         """The Jacobian with each sensor chain's lag column taken as the secant over one drive update interval
         centred on the fit (clipped to the bounds). Samples taken in step with a staircase drive read it the
@@ -565,10 +590,7 @@ class Problem:
         and takes the lag as resolved below the interval the data can place it to. The secant over one
         interval is the envelope's slope wherever in the interval the lag sits (docs/gap.md, Method)."""
         lo, hi = lay.bounds()
-        for chain, width in self.lag_resolution_s.items():
-            i = lay.index.get(("lag",) + chain)
-            if i is None or width <= 0.0:
-                continue
+        for i, width in self._lag_columns(lay).items():
             a, b = max(lo[i], x[i] - width / 2), min(hi[i], x[i] + width / 2)
             if b <= a:
                 continue

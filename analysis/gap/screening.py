@@ -187,7 +187,13 @@ def add_each_here(p: Problem) -> AddEach:
 def fit_added(p: Problem, base: Fit, name: str, start: Start | None, max_nfev: int) -> Fit:
     """`base`'s effects plus `name`, fitted from `start` (None: from `base` and `name`'s grid start)."""
     return p.solve(tuple(base.names) + (name,), dict(start) if start is not None else grid_start(p, base, name),
-                   max_nfev=max_nfev)
+                   max_nfev=max_nfev, free_lags=_lags_stand_in(base, name))
+
+
+def _lags_stand_in(base: Fit, name: str) -> bool:
+    """Adding drive effect `name` to `base`, whose lags were fitted with no drive effect: they may stand in for
+    the effect's delayed response on the ramps, and are moved along their envelope first (`lag_envelope`)."""
+    return FAMILIES[name].kind == "drive" and not any(FAMILIES[n].kind == "drive" for n in base.names)
 
 
 def carried_start(base: Fit, other: Fit, name: str) -> dict[tuple, float]:
