@@ -1,5 +1,5 @@
-"""Freeing a sensor chain's lag that was fitted without a drive effect, when the effect is added
-(`Problem.solve(free_lags=True)`, from `screening.fit_added`).
+"""Freeing a sensor chain's lag that was fitted without a drive effect, when the effect is added to the nominal
+fit (`Problem.solve(free_lags=True)`, from `screening.fit_added`).
 
 A sample taken in step with a staircase drive (a commanded one, or a logged command) reads the same step until
 its lag carries it across the next update, so the rows are a staircase in the lag: flat within an interval, steep

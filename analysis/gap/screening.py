@@ -191,9 +191,11 @@ def fit_added(p: Problem, base: Fit, name: str, start: Start | None, max_nfev: i
 
 
 def _lags_stand_in(base: Fit, name: str) -> bool:
-    """Adding drive effect `name` to `base`, whose lags were fitted with no drive effect: they may stand in for
-    the effect's delayed response on the ramps, and are moved along their envelope first (`lag_envelope`)."""
-    return FAMILIES[name].kind == "drive" and not any(FAMILIES[n].kind == "drive" for n in base.names)
+    """Adding drive effect `name` to the nominal fit (screening, a selection's first step): its lags may stand in
+    for the effect's delayed response on the ramps, and are moved along their envelope first (`lag_envelope`).
+    Later fits start from the screened fit's lags. Freeing them too wherever the base holds no drive effect cost
+    the five-effect campaign ~9 s of its 60 for one drift more on 90 self-check trials (docs/gap.md, Method)."""
+    return FAMILIES[name].kind == "drive" and not base.names
 
 
 def carried_start(base: Fit, other: Fit, name: str) -> dict[tuple, float]:
