@@ -18,6 +18,7 @@ polished with ordinary differences from there (the rows' fine structure within a
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import cached_property
 
 import numpy as np
 from scipy.sparse import csc_matrix, csr_matrix
@@ -37,8 +38,12 @@ class SecantJacobian:
         self.rows_of = [pattern.indices[pattern.indptr[j]:pattern.indptr[j + 1]] for j in range(self.shape[1])]
         self.lags = dict(lags)
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
-        self.groups = _groups([j for j in range(self.shape[1]) if j not in self.lags], self.rows_of, self.shape[0])
         self.lag_groups = _groups(sorted(self.lags), self.rows_of, self.shape[0])   # chains' rows are disjoint
+
+    @cached_property
+    def groups(self) -> list[np.ndarray]:
+        """The other columns in groups that touch no row in common (only the solver's J needs them)."""
+        return _groups([j for j in range(self.shape[1]) if j not in self.lags], self.rows_of, self.shape[0])
 
     def __call__(self, fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> csr_matrix:
         x = np.asarray(x, float)
@@ -55,6 +60,20 @@ class SecantJacobian:
                 rows.append(r)
                 cols.append(np.full(r.size, j))
                 vals.append(df[r] / (xp[j] - x[j]))
+        for j, r, v in self.lag_columns(fun, x):
+            rows.append(r)
+            cols.append(np.full(r.size, j))
+            vals.append(v)
+        if not rows:
+            return csr_matrix(self.shape)
+        return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=self.shape)
+
+
+    def lag_columns(self, fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray
+                    ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Each lag's (index, rows, values): the secant over its interval centred on x, clipped to the bounds (a lag
+        pinned at both is left out); the chains touch disjoint rows, so two evaluations serve every lag."""
+        out = []
         for group in self.lag_groups:
             xa, xb = x.copy(), x.copy()
             for j in group:
@@ -62,15 +81,10 @@ class SecantJacobian:
                 xb[j] = min(self.hi[j], x[j] + self.lags[j] / 2)
             fa, fb = fun(xa), fun(xb)
             for j in group:
-                if xb[j] <= xa[j]:
-                    continue
-                r = self.rows_of[j]
-                rows.append(r)
-                cols.append(np.full(r.size, j))
-                vals.append((fb[r] - fa[r]) / (xb[j] - xa[j]))
-        if not rows:
-            return csr_matrix(self.shape)
-        return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=self.shape)
+                if xb[j] > xa[j]:
+                    r = self.rows_of[j]
+                    out.append((int(j), r, (fb[r] - fa[r]) / (xb[j] - xa[j])))
+        return out
 
 
 def _groups(columns: list[int], rows_of: list[np.ndarray], n_rows: int) -> list[np.ndarray]:

@@ -589,14 +589,13 @@ class Problem:
         it, so a steep entry lets a linearised refit move the lag far and predict a left-out condition far off,
         and takes the lag as resolved below the interval the data can place it to. The secant over one
         interval is the envelope's slope wherever in the interval the lag sits (docs/gap.md, Method)."""
-        lo, hi = lay.bounds()
-        for i, width in self._lag_columns(lay).items():
-            a, b = max(lo[i], x[i] - width / 2), min(hi[i], x[i] + width / 2)
-            if b <= a:
-                continue
-            xa, xb = x.copy(), x.copy()
-            xa[i], xb[i] = a, b
-            j[:, i] = (self.residual(lay, xb) - self.residual(lay, xa)) / (b - a)
+        lags = self._lag_columns(lay)
+        if lags:
+            lo, hi = lay.bounds()
+            for i, rows, values in SecantJacobian(lay.sparsity, lags, lo, hi).lag_columns(
+                    lambda v: self.residual(lay, v), x):
+                j[:, i] = 0.0
+                j[rows, i] = values
         return j
 
     def drift_strength(self, lay: Layout, x: np.ndarray) -> float:
