@@ -94,6 +94,10 @@ class FoxgloveClient:
             raise TimeoutError(f"no reply to the call of {name}")
         return self._replies.pop(call_id)
 
+    def subscribed_topics(self) -> list[str]:
+        """The topics this client has asked for (a channel unadvertised since shows as its id)."""
+        return sorted(self.channels[c].topic if c in self.channels else f"#{c}" for c in self._subscriptions.values())
+
     def close(self) -> None:
         if self._ws is not None and not self._closed.is_set():
             asyncio.run_coroutine_threadsafe(self._ws.close(), self._loop)

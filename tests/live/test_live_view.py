@@ -155,9 +155,7 @@ def _served(client: FoxgloveClient) -> int:
 
 def _client_state(client: FoxgloveClient) -> str:
     channels = sorted(c.topic for c in client.channels.values())
-    subscribed = sorted(client.channels[c].topic if c in client.channels else f"#{c}"
-                        for c in client._subscriptions.values())
-    return (f"counts {client.counts}; advertised {channels}; subscribed {subscribed}; "
+    return (f"counts {client.counts}; advertised {channels}; subscribed {client.subscribed_topics()}; "
             f"server status {client.statuses[:5]}; errors {client.errors}")
 
 
@@ -166,9 +164,8 @@ def test_abort_needs_the_token_and_ends_the_run_aborted_with_the_rig_safe(tmp_pa
     client = FoxgloveClient(run.url, topics={"/force", "/log"})
     try:
         client.start()
-        # the run's progress as the client sees it: messages of either stream. In two full-suite runs (never
-        # alone, not in 40 tries under load) the client was served /log but never /force; the abort path is what
-        # this test checks, so it goes by both (the streams themselves are checked by the test above).
+        # the run's progress as the client sees it, by the messages of either stream: this test checks the abort
+        # path, not that each stream arrives (the test above does that)
         assert client.wait_for(lambda c: _served(c) >= 20, 60), _client_state(client)
         status, message = client.call_service("/hamr_bench/abort", {"token": "guessed", "reason": "intruder"})
         assert status == "failure" and "token" in message
