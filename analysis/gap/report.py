@@ -89,8 +89,11 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
         return
     cols = min(n, 3)
     rows_n = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows_n, cols, figsize=(5 * cols, 3.6 * rows_n), squeeze=False)
-    for ax, ((k, mode), idx) in zip(axes.flat, panels.items()):
+    # under each overlay its residuals: a gap of a few noise widths is invisible on the full scale of the data
+    fig, axes = plt.subplots(2 * rows_n, cols, figsize=(5 * cols, 5.4 * rows_n), squeeze=False,
+                             gridspec_kw={"height_ratios": [3, 1.6] * rows_n})
+    for j, ((k, mode), idx) in enumerate(panels.items()):
+        ax, res = axes[2 * (j // cols), j % cols], axes[2 * (j // cols) + 1, j % cols]
         run = problem.data.runs[k]
         rows = [problem.rows[i] for i in idx]
         # against sag where the rows sweep it (sag sweeps, static loads, an actuator's stiffness steps at 0 V)
@@ -99,18 +102,24 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
         scale = 1e3 if rows[0].quantity == "force_N" else 1e6
         unit = "mN" if rows[0].quantity == "force_N" else "um"
         order = np.argsort(x, kind="stable")
-        ax.errorbar(x, problem.y[idx] * scale, yerr=2 * problem.sigma[idx] * scale, fmt="o", ms=3, color="k",
-                    label="measured (+-2 se)")
-        for fit, style, name in ((fit0, "x--", "nominal"), (fit1, "+-", label)):
+        y, err = problem.y[idx] * scale, 2 * problem.sigma[idx] * scale
+        ax.errorbar(x, y, yerr=err, fmt="o", ms=3, color="k", label="measured (+-2 se)")
+        res.axhline(0.0, color="k", lw=0.8)
+        nudge = 0.01 * (np.ptp(x) or 1.0)     # the two models' residuals side by side, not on top of each other
+        for side, (fit, style, name) in zip((-1, 1), ((fit0, "x--", "nominal"), (fit1, "+-", label)), strict=True):
             ax.plot(x[order], fit[idx][order] * scale, style, ms=6, label=name)
-        ax.set_xlabel("sag (mm)" if use_sag else "bias voltage (V)")
+            res.errorbar(x + side * nudge, y - fit[idx] * scale, yerr=err, fmt=style[0], ms=5, capsize=2)
+        xlabel = "sag (mm)" if use_sag else "bias voltage (V)"
+        res.set_xlabel(xlabel)
         ax.set_ylabel(f"{rows[0].quantity.split('_')[0]} ({unit})")
+        res.set_ylabel(f"measured - model ({unit})", fontsize=8)
         who = f"design {run.design}" if run.fixture == "leg" else f"{run.layers}-layer actuator"
         who += f", specimen {run.specimen}" if run.specimen else ""
         ax.set_title(f"{run.protocol} {mode} ({who})".replace("  ", " "), fontsize=9)
         ax.legend(fontsize=7)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
+    for j in range(n, rows_n * cols):
+        axes[2 * (j // cols), j % cols].axis("off")
+        axes[2 * (j // cols) + 1, j % cols].axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -133,6 +142,7 @@ def waterfall_png(result: dict[str, Any], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker as mticker
 
     steps = result["waterfall"]
     labels = ["nominal"] + [_bar_label(w) for w in steps[1:]]
@@ -147,6 +157,12 @@ def waterfall_png(result: dict[str, Any], path: Path) -> None:
     ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
     ax.set_xticks(range(len(steps)), labels, fontsize=8)
     ax.set_yscale("log")
+    # plain figures on the log axis (1.2, not 1.2 x 10^0); the minor ticks labelled only within one decade,
+    # where matplotlib would otherwise label them in powers of ten (most gaps read are between 1 and 2)
+    ax.yaxis.set_major_formatter(mticker.FormatStrFormatter("%.3g"))
+    low, high = ax.get_ylim()
+    if high / low < 10:
+        ax.yaxis.set_minor_formatter(mticker.FormatStrFormatter("%.3g"))
     ax.set_ylabel("held-out RMS gap (residual / standard error)")
     ax.set_title("held-out gap after each named effect\n(green: attributed, orange: ambiguous or partial)",
                  fontsize=9)
