@@ -109,8 +109,7 @@ def overlays_png(problem, fit0: np.ndarray, fit1: np.ndarray, label: str, path: 
         for side, (fit, style, name) in zip((-1, 1), ((fit0, "x--", "nominal"), (fit1, "+-", label)), strict=True):
             ax.plot(x[order], fit[idx][order] * scale, style, ms=6, label=name)
             res.errorbar(x + side * nudge, y - fit[idx] * scale, yerr=err, fmt=style[0], ms=5, capsize=2)
-        xlabel = "sag (mm)" if use_sag else "bias voltage (V)"
-        res.set_xlabel(xlabel)
+        res.set_xlabel("sag (mm)" if use_sag else "bias voltage (V)")
         ax.set_ylabel(f"{rows[0].quantity.split('_')[0]} ({unit})")
         res.set_ylabel(f"measured - model ({unit})", fontsize=8)
         who = f"design {run.design}" if run.fixture == "leg" else f"{run.layers}-layer actuator"
