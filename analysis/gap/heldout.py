@@ -1,8 +1,9 @@
 """Held-out judgement: the prediction of data the fit did not see, two ways, and bootstrap intervals over
 conditions.
 
-- Condition folds: whole conditions (replicates and a condition's specimens' phases stay together) left out, each
-  predicted by the model refitted without it: does the model carry to a new drive condition?
+- Condition folds: whole conditions (replicates and a condition's specimens' phases stay together; its undriven
+  dwell apart, `folds`) left out, each predicted by the model refitted without it: does the model carry to a new
+  drive condition?
 - Specimen folds (where the data hold two or more specimen groups): each specimen left out and predicted from the
   population, its gains at the prior's centre, in units of the predictive spread (noise and the tolerance prior's
   spread of its gains): does the model carry to a new specimen? This is where a fabrication shift common to every
@@ -31,6 +32,7 @@ from analysis.gap.problem import Fit, Problem
 from analysis.gap.results import HeldOut
 
 N_FOLDS = 5
+UNDRIVEN_PHASE = "low_late"   # the settled part of a cycle's low dwell (`features.PHASES`)
 N_BOOT = 400
 NAN_Z = 1e3       # a row the model cannot evaluate (as `problem.NAN_RESIDUAL`)
 
@@ -49,10 +51,18 @@ def condition_ids(p: Problem) -> np.ndarray:
 
 
 def folds(p: Problem) -> list[np.ndarray]:
+    """The condition folds' held-out rows: conditions dealt round N_FOLDS folds, each condition's undriven dwell
+    (`UNDRIVEN_PHASE`) in the next fold from its driven rows. A force baseline is read at the undriven dwell of the
+    same cycles: left out with the rest of its file, a file's level is seen by no training row, and no model
+    could be credited for a baseline (on imported traces each file is one step, one level per file). Every row is
+    still held out once."""
     cid = condition_ids(p)
     n = int(cid.max()) + 1 if cid.size else 0
     k = min(N_FOLDS, max(n, 1))
-    out = [np.isin(cid, [i for i in range(n) if i % k == j]) for j in range(k)]
+    fold = cid % k
+    undriven = np.array([r.phase == UNDRIVEN_PHASE for r in p.rows], bool)
+    fold = np.where(undriven, (fold + 1) % k, fold)
+    out = [fold == j for j in range(k)]
     return [f for f in out if f.any() and not f.all()]
 
 
