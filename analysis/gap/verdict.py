@@ -28,7 +28,7 @@ from analysis.gap import tolerances as tol
 from analysis.gap.families import FAMILIES
 from analysis.gap.heldout import Judge, rms
 from analysis.gap.problem import Fit, Problem
-from analysis.gap.ranking import Selection, strength_estimate
+from analysis.gap.ranking import Selection, strength_estimate, within_unruled_models
 from analysis.gap.results import AmbiguousSet, NamedEffect
 
 CLOSED_MIN = 0.5
@@ -172,7 +172,8 @@ def baseline_closure(p: Problem, nominal: Fit, fit: Fit, judge: Judge) -> float:
 def decide(p: Problem, sel: Selection, judge: Judge) -> tuple[list[NamedEffect], str | None, list[AmbiguousSet]]:
     final = sel.fits[-1]
     rms0 = sel.steps[0].heldout.rms
-    estimates = {s.added: strength_estimate(p, final, s.added, judge) for s in sel.steps[1:] if s.added}
+    estimates = {s.added: within_unruled_models(s.added, strength_estimate(p, final, s.added, judge),
+                                                sel.unruled.values()) for s in sel.steps[1:] if s.added}
     total_closed, gap_read = real_closure(p, sel, estimates, judge)
     named: list[NamedEffect] = []
     cannot: list[AmbiguousSet] = []
