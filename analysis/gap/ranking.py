@@ -281,9 +281,9 @@ def within_unruled_models(name: str, estimate: tuple[float, tuple[float, float]]
                           ) -> tuple[float, tuple[float, float]]:
     """A strength's interval widened to hold the strength each unruled model gives it (`Selection.unruled`: the
     final model with one more candidate, which passed the in-sample test and not the held-out one). The data do
-    not rule those models out, and an effect left out of a model biases the strengths of those in it: on the
-    self-check (seeds 3314-3316) most intervals that missed the truth were on trials with an effect missing or one
-    too many. The drift's wander is derived from its coefficients, not held in a strength, and is left as it is."""
+    not rule those models out, and an effect left out of a model biases the strengths of those in it (measured in
+    docs/gap.md, Method stage 6). The drift's wander is derived from its coefficients, not held in a strength, and
+    is left as it is."""
     s, (lo, hi) = estimate
     if FAMILIES[name].kind == "baseline":
         return estimate
